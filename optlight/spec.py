@@ -1,0 +1,604 @@
+"""Problem files: TOML -> validated, typed, immutable dataclasses.
+
+A problem file is data. Every key is declared once, here, with its type, unit, default, allowed
+range and a one-line description; :func:`load_problem` checks a file against these declarations and
+``python -m optlight.spec`` writes the reference (``docs/problems.md``) from them, so the code and
+the documentation cannot drift apart.
+
+Conventions (DESIGN §2): metres and degrees in files (keys end in ``_m`` / ``_deg``), radians in
+code. Paths inside a file are relative to that file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from optlight.errors import ProblemError
+
+Vec3 = tuple[float, float, float]
+
+#: Folder of the built-in problem files (the repository's ``problems/``).
+PROBLEMS_DIR = Path(__file__).resolve().parent.parent / "problems"
+
+
+def key(
+    default: Any,
+    doc: str,
+    *,
+    unit: str = "",
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+) -> Any:
+    """Declare a problem-file key: default, one-line doc, unit and closed (or left-open) range."""
+    meta = {"doc": doc, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
+    if isinstance(default, list | dict) or dataclasses.is_dataclass(default):
+        value = default
+        return field(default_factory=lambda: value, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def section(cls: type, doc: str) -> Any:
+    """Declare a nested table whose keys all have defaults."""
+    return field(default_factory=cls, metadata={"doc": doc})
+
+
+# --------------------------------------------------------------------------------------------
+# Sections
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FaceSpec:
+    """The procedural face (object kind "face"): a head-sized relief, mirror-symmetric."""
+
+    height_m: float = key(0.22, "chin-to-forehead height of the face", unit="m", lo=0.02, lo_open=True)
+    nose_m: float = key(0.028, "how far the nose tip stands out of the face", unit="m", lo=0.0)
+    brow_m: float = key(0.010, "height of the brow ridges", unit="m", lo=0.0)
+    eye_depth_m: float = key(0.014, "depth of the eye sockets", unit="m", lo=0.0)
+    lip_m: float = key(0.008, "how far the lips stand out", unit="m", lo=0.0)
+    cheek_m: float = key(0.010, "fullness of the cheeks", unit="m", lo=0.0)
+    skin_albedo: float = key(0.75, "albedo of the skin", lo=0.0, hi=1.0)
+    brow_albedo: float = key(0.25, "albedo of the eyebrows", lo=0.0, hi=1.0)
+    lip_albedo: float = key(0.45, "albedo of the lips", lo=0.0, hi=1.0)
+    resolution: int = key(160, "vertices along each side of the face grid", lo=16, hi=1024)
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """The observed object. Its frame is the light-sphere frame S at the centre O: +z towards the
+    camera, +y up (DESIGN §2), so a mesh's front is its +z side and its top is +y."""
+
+    kind: Literal["face", "sphere", "mesh"] = key("face", "what the camera looks at")
+    center_m: Vec3 = key((0.45, -0.25, 0.35), "object centre O in the world frame", unit="m")
+    radius_m: float = key(0.1, "sphere radius (kind = sphere)", unit="m", lo=0.0, lo_open=True)
+    path: str | None = key(None, "mesh file trimesh reads: OBJ, PLY, STL, GLB (kind = mesh)")
+    scale: float = key(1.0, "factor from mesh units to metres (kind = mesh)", lo=0.0, lo_open=True)
+    albedo: float = key(0.8, "albedo where the mesh has no vertex colours (sphere, mesh)", lo=0.0, hi=1.0)
+    face: FaceSpec = section(FaceSpec, "procedural face parameters (kind = face)")
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """Pinhole camera, OpenCV axes (z forward, y down), placed by position and look-at point."""
+
+    position_m: Vec3 = key((0.45, -1.05, 0.35), "camera centre in the world frame", unit="m")
+    look_at_m: Vec3 | None = key(
+        None, "point the optical axis passes through (default: object centre)", unit="m"
+    )
+    width: int = key(256, "image width", unit="px", lo=1, hi=8192)
+    height: int = key(256, "image height", unit="px", lo=1, hi=8192)
+    fov_deg: float = key(
+        20.0,
+        "vertical field of view, used where fy_px is not given",
+        unit="deg",
+        lo=0.0,
+        hi=170.0,
+        lo_open=True,
+    )
+    fx_px: float | None = key(
+        None, "focal length along x (default: from fov_deg)", unit="px", lo=0.0, lo_open=True
+    )
+    fy_px: float | None = key(
+        None, "focal length along y (default: from fov_deg)", unit="px", lo=0.0, lo_open=True
+    )
+    cx_px: float | None = key(None, "principal point x (default: image centre)", unit="px")
+    cy_px: float | None = key(None, "principal point y (default: image centre)", unit="px")
+
+
+@dataclass(frozen=True)
+class LightSphereSpec:
+    """The sphere the light moves on: centre O, radius b, zenith 0 = towards the camera."""
+
+    radius_m: float = key(0.40, "radius b of the light sphere", unit="m", lo=0.0, lo_open=True)
+    zenith_min_deg: float = key(
+        0.0, "smallest allowed zenith (angle from the camera axis)", unit="deg", lo=0.0, hi=90.0
+    )
+    zenith_max_deg: float = key(60.0, "largest allowed zenith", unit="deg", lo=0.0, hi=90.0)
+
+
+@dataclass(frozen=True)
+class LightSpec:
+    """Lambertian light model (DESIGN §4): I = clip(gain·ρ(E·v·max(0, n·l)·falloff + ambient))."""
+
+    model: Literal["directional", "point"] = key(
+        "directional", "directional light, or point light with (b/r)² falloff"
+    )
+    power: float = key(1.0, "light power E (irradiance at the sphere radius)", lo=0.0)
+    ambient: float = key(0.05, "ambient term k_amb", lo=0.0)
+    gain: float = key(1.0, "camera gain g", lo=0.0, lo_open=True)
+    saturation: float = key(1.0, "pixel value where the sensor saturates (clip level)", lo=0.0, lo_open=True)
+    cast_shadows: bool = key(True, "trace shadow rays (the differentiable model uses them as a fixed mask)")
+    noise_std: float = key(0.0, "standard deviation of additive Gaussian sensor noise", lo=0.0)
+    seed: int = key(0, "seed of the sensor noise")
+    softplus_sharpness: float = key(
+        60.0, "β of the smooth max(0, n·l) in the differentiable model", lo=0.0, lo_open=True
+    )
+    clip_sharpness: float = key(
+        60.0, "sharpness of the smooth saturation clip in the differentiable model", lo=0.0, lo_open=True
+    )
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """The arm that carries the light. A named robot comes from example-robot-data."""
+
+    name: str = key(
+        "panda", "robot name (panda, ur3, ur5, ur10, xarm7, kinova, z1), or a label when urdf is set"
+    )
+    urdf: str | None = key(None, "path of a user URDF instead of a named robot")
+    frame: str | None = key(None, "flange frame the light is attached to (default: the robot's tool frame)")
+    base_position_m: Vec3 = key((0.0, 0.0, 0.0), "robot base position in the world frame", unit="m")
+    base_rpy_deg: Vec3 = key((0.0, 0.0, 0.0), "robot base roll, pitch, yaw in the world frame", unit="deg")
+    light_offset_m: Vec3 = key((0.0, 0.0, 0.0), "light frame origin in the flange frame", unit="m")
+    light_rpy_deg: Vec3 = key(
+        (0.0, 0.0, 0.0), "light frame roll, pitch, yaw in the flange frame (light emits along +z)", unit="deg"
+    )
+    acceleration_limit: float | None = key(
+        None, "joint acceleration limit, all joints (default: per robot)", unit="rad/s²", lo=0.0, lo_open=True
+    )
+    velocity_scale: float = key(
+        1.0, "fraction of the URDF velocity limits the plan may use", lo=0.0, hi=1.0, lo_open=True
+    )
+
+
+@dataclass(frozen=True)
+class TermSpec:
+    """One weighted term of the luminance objective."""
+
+    kind: Literal["histogram", "image", "mean", "contrast", "saturation", "shadow"] = key(
+        "histogram",
+        "histogram distance, image difference, mean or contrast target, saturated or shadowed fraction",
+    )
+    weight: float = key(1.0, "weight of the term in the sum", lo=0.0)
+    distance: Literal["l2", "chi2", "emd", "emd2"] = key("emd2", "histogram distance (kind = histogram)")
+    target: float | None = key(None, "target mean or standard deviation (kind = mean | contrast)", lo=0.0)
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """What the image is compared with."""
+
+    kind: Literal["light", "image", "bins"] = key(
+        "light", "render at a reference light, read an image, or take given bins"
+    )
+    zenith_deg: float = key(
+        10.0, "reference light zenith (kind = light; the paper uses 10°)", unit="deg", lo=0.0, hi=90.0
+    )
+    azimuth_deg: float = key(0.0, "reference light azimuth (kind = light)", unit="deg")
+    image: str | None = key(None, "reference image, PNG or NPY (kind = image)")
+    mask: str | None = key(None, "mask image of the pixels to compare, non-zero = used (kind = image)")
+    bins: tuple[float, ...] | None = key(
+        None, "reference histogram (kind = bins), renormalised to sum 1", lo=0.0
+    )
+
+
+@dataclass(frozen=True)
+class ObjectiveSpec:
+    """The luminance objective: a weighted sum of terms against one reference."""
+
+    terms: tuple[TermSpec, ...] = key((TermSpec(),), "the terms, as [[objective.terms]] tables")
+    bins: int = key(32, "number K of histogram bins on [0, 1]", lo=2, hi=1024)
+    sigma_bins: float = key(
+        1.0, "Gaussian kernel σ of the soft histogram, in bin widths", lo=0.0, lo_open=True
+    )
+    reference: ReferenceSpec = section(ReferenceSpec, "the reference")
+
+
+@dataclass(frozen=True)
+class LandmarksSpec:
+    """Where the light should go (paper, Section 4)."""
+
+    mode: Literal["azimuth", "free"] = key(
+        "azimuth", "best zenith per equally spaced azimuth, or the best positions on the cap"
+    )
+    count: int = key(36, "number M of landmarks", lo=1, hi=720)
+    min_separation_deg: float = key(
+        10.0, "smallest angle between two landmarks (mode = free)", unit="deg", lo=0.0
+    )
+    sweep_step_deg: float = key(
+        2.0,
+        "zenith step of the coarse sweep that seeds the refinement",
+        unit="deg",
+        lo=0.0,
+        hi=45.0,
+        lo_open=True,
+    )
+    seeds: int = key(3, "sweep minima refined by IPOPT per azimuth", lo=1, hi=50)
+    allow_partial: bool = key(False, "drop unreachable landmarks with a warning instead of failing")
+
+
+@dataclass(frozen=True)
+class TrajectorySpec:
+    """How the robot gets there (DESIGN §6)."""
+
+    order: Literal["azimuth", "tour"] = key(
+        "azimuth", "visit the landmarks in azimuth order, or a shorter tour in joint space"
+    )
+    path: Literal["arc", "free"] = key("arc", "keep the light on great-circle arcs, or only on the sphere")
+    knot_spacing_deg: float = key(
+        2.0, "largest angle between two path knots", unit="deg", lo=0.0, hi=30.0, lo_open=True
+    )
+    max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
+    dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
+    image_pattern: str = key("img_{index:03d}.png", "image file names written into lights.lp")
+
+
+@dataclass(frozen=True)
+class SolverSpec:
+    """Numerical settings shared by the NLPs and the IK."""
+
+    max_iter: int = key(300, "IPOPT iteration limit", lo=1)
+    tol: float = key(1e-8, "IPOPT tolerance", lo=0.0, lo_open=True)
+    ik_damping: float = key(1e-4, "damping λ² of the pseudoinverse J# = Jᵀ(JJᵀ + λ²I)⁻¹", lo=0.0)
+    ik_max_iter: int = key(200, "generalized IK iteration limit", lo=1)
+    ik_tol: float = key(1e-9, "generalized IK residual tolerance (squared norm)", lo=0.0, lo_open=True)
+    verbose: bool = key(False, "print solver output")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A whole light-positioning problem."""
+
+    description: str = key("", "one line that says what the problem is")
+    object: ObjectSpec = section(ObjectSpec, "the observed object")
+    camera: CameraSpec = section(CameraSpec, "the fixed camera")
+    light_sphere: LightSphereSpec = section(LightSphereSpec, "where the light may be")
+    light: LightSpec = section(LightSpec, "the light and image model")
+    robot: RobotSpec = section(RobotSpec, "the robot carrying the light")
+    objective: ObjectiveSpec = section(ObjectiveSpec, "what a good image is")
+    landmarks: LandmarksSpec = section(LandmarksSpec, "the landmark search")
+    trajectory: TrajectorySpec = section(TrajectorySpec, "path, timing and export")
+    solver: SolverSpec = section(SolverSpec, "numerical settings")
+    source: Path | None = field(default=None, compare=False, metadata={"internal": True})
+
+    @property
+    def name(self) -> str:
+        """The problem's name: its file stem, or "inline"."""
+        return self.source.stem if self.source else "inline"
+
+    def resolve(self, relative: str) -> Path:
+        """A path written in the problem file, made absolute against the file's folder."""
+        path = Path(relative).expanduser()
+        if path.is_absolute() or self.source is None:
+            return path
+        return (self.source.parent / path).resolve()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The problem as plain data (for plan.json): every key, defaults included."""
+        return _to_plain(self)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------
+
+
+def available_problems() -> dict[str, str]:
+    """Built-in problem names mapped to their one-line descriptions."""
+    out = {}
+    for path in sorted(PROBLEMS_DIR.glob("*.toml")):
+        try:
+            with path.open("rb") as f:
+                out[path.stem] = str(tomllib.load(f).get("description", ""))
+        except (OSError, tomllib.TOMLDecodeError):
+            out[path.stem] = "(unreadable)"
+    return out
+
+
+def resolve_problem_path(name_or_path: str | Path) -> Path:
+    """A problem file from a path, or from the name of a file in ``problems/``."""
+    path = Path(name_or_path).expanduser()
+    if path.is_file():
+        return path.resolve()
+    named = PROBLEMS_DIR / f"{name_or_path}.toml"
+    if named.is_file():
+        return named
+    names = ", ".join(available_problems()) or "none"
+    raise ProblemError(str(name_or_path), "", f"an existing file or a built-in problem ({names})")
+
+
+def load_problem(name_or_path: str | Path) -> Problem:
+    """Read and validate a problem file (a path or a built-in name) into a :class:`Problem`."""
+    path = resolve_problem_path(name_or_path)
+    try:
+        with path.open("rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise ProblemError(str(path), "", f"valid TOML ({e})") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ProblemError(str(path), "", f"a readable TOML file ({e})") from None
+    return problem_from_dict(data, source=path)
+
+
+def problem_from_dict(data: dict[str, Any], source: Path | None = None) -> Problem:
+    """Validate a parsed problem (as from TOML) into a :class:`Problem`."""
+    file = str(source) if source else "<inline>"
+    problem = _build(Problem, data, "", file)
+    problem = dataclasses.replace(problem, source=source)
+    _check_consistency(problem, file)
+    return problem
+
+
+def _build(cls: type, data: Any, path: str, file: str) -> Any:
+    """Build dataclass ``cls`` from ``data``, checking keys, types and ranges."""
+    if not isinstance(data, dict):
+        raise ProblemError(file, path or "(top level)", "a table", data)
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls) if not f.metadata.get("internal")}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        where = f"{path}.{unknown[0]}" if path else unknown[0]
+        raise ProblemError(file, where, f"one of the keys {', '.join(fields)} (unknown key)")
+    values = {}
+    for name, value in data.items():
+        where = f"{path}.{name}" if path else name
+        values[name] = _convert(hints[name], value, fields[name].metadata, where, file)
+    return cls(**values)
+
+
+def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
+    """Convert one TOML value to the declared type ``tp``, or raise :class:`ProblemError`."""
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        inner = [a for a in args if a is not type(None)]
+        return _convert(inner[0], value, meta, where, file)
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+        return _build(tp, value, where, file)
+    if origin is Literal:
+        if value not in args:
+            raise ProblemError(file, where, "one of " + ", ".join(repr(a) for a in args), value)
+        return value
+    if origin is tuple:
+        if not isinstance(value, list):
+            raise ProblemError(file, where, _describe(tp), value)
+        if len(args) == 2 and args[1] is Ellipsis:
+            items = [_convert(args[0], v, meta, f"{where}[{i}]", file) for i, v in enumerate(value)]
+            if not items:
+                raise ProblemError(file, where, "a non-empty list", value)
+            return tuple(items)
+        if len(value) != len(args):
+            raise ProblemError(file, where, _describe(tp), value)
+        return tuple(
+            _convert(a, v, meta, f"{where}[{i}]", file)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ProblemError(file, where, "true or false", value)
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ProblemError(file, where, "an integer", value)
+        _check_range(float(value), meta, where, file)
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            raise ProblemError(file, where, "a finite number", value)
+        _check_range(float(value), meta, where, file)
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ProblemError(file, where, "a string", value)
+        return value
+    raise TypeError(f"spec type {tp!r} at {where} is not supported")  # a bug in this module
+
+
+def _check_range(x: float, meta: Any, where: str, file: str) -> None:
+    lo, hi, lo_open = meta.get("lo"), meta.get("hi"), meta.get("lo_open", False)
+    unit = f" {meta.get('unit')}" if meta.get("unit") else ""
+    if lo is not None and (x < lo or (lo_open and x == lo)):
+        raise ProblemError(file, where, f"a value {'>' if lo_open else '≥'} {lo:g}{unit}", x)
+    if hi is not None and x > hi:
+        raise ProblemError(file, where, f"a value ≤ {hi:g}{unit}", x)
+
+
+def _check_consistency(p: Problem, file: str) -> None:
+    """Checks that involve several keys: zenith range, camera placement, per-kind requirements."""
+    ls, cam, obj = p.light_sphere, p.camera, p.object
+    if ls.zenith_min_deg >= ls.zenith_max_deg:
+        raise ProblemError(
+            file,
+            "light_sphere.zenith_max_deg",
+            f"a value > zenith_min_deg ({ls.zenith_min_deg:g})",
+            ls.zenith_max_deg,
+        )
+    centre = np.asarray(obj.center_m)
+    eye = np.asarray(cam.position_m)
+    dist = float(np.linalg.norm(eye - centre))
+    if dist <= ls.radius_m:
+        raise ProblemError(
+            file,
+            "camera.position_m",
+            f"a camera outside the light sphere (distance to the object {dist:.3f} m > radius {ls.radius_m:g} m)",
+            list(cam.position_m),
+        )
+    target = np.asarray(cam.look_at_m) if cam.look_at_m is not None else centre
+    forward = target - eye
+    if np.linalg.norm(forward) < 1e-9:
+        raise ProblemError(
+            file, "camera.look_at_m", "a point different from the camera position", list(target)
+        )
+    from optlight.scene.camera import Camera  # local: the scene depends on this module
+
+    u, v, depth = Camera.from_spec(cam, centre).project(centre[None, :])
+    if depth[0] <= 0 or not (0 <= u[0] < cam.width and 0 <= v[0] < cam.height):
+        raise ProblemError(
+            file, "camera.look_at_m", "a camera that sees the object centre inside its image", list(target)
+        )
+    if obj.kind == "mesh" and obj.path is None:
+        raise ProblemError(file, "object.path", "a mesh file path (object.kind = 'mesh')")
+    if obj.kind == "mesh" and obj.path is not None and not p.resolve(obj.path).is_file():
+        raise ProblemError(file, "object.path", "an existing mesh file", obj.path)
+    if obj.kind == "sphere" and obj.radius_m >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "object.radius_m",
+            f"a sphere smaller than the light sphere (< {ls.radius_m:g} m)",
+            obj.radius_m,
+        )
+    ref = p.objective.reference
+    if ref.kind == "image":
+        if ref.image is None:
+            raise ProblemError(file, "objective.reference.image", "an image path (reference.kind = 'image')")
+        for name in ("image", "mask"):
+            rel = getattr(ref, name)
+            if rel is not None and not p.resolve(rel).is_file():
+                raise ProblemError(file, f"objective.reference.{name}", "an existing PNG or NPY file", rel)
+    if ref.kind == "bins":
+        if ref.bins is None or len(ref.bins) != p.objective.bins:
+            raise ProblemError(
+                file,
+                "objective.reference.bins",
+                f"{p.objective.bins} non-negative numbers (objective.bins)",
+                ref.bins,
+            )
+        if sum(ref.bins) <= 0:
+            raise ProblemError(file, "objective.reference.bins", "bins with a positive sum", ref.bins)
+    for i, term in enumerate(p.objective.terms):
+        if term.kind in ("mean", "contrast") and term.target is None:
+            raise ProblemError(file, f"objective.terms[{i}].target", f"a target value (kind = '{term.kind}')")
+    if p.robot.urdf is not None:
+        if not p.resolve(p.robot.urdf).is_file():
+            raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
+        if p.robot.frame is None:
+            raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+
+
+def _to_plain(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {
+            f.name: _to_plain(getattr(value, f.name))
+            for f in dataclasses.fields(value)
+            if not f.metadata.get("internal")
+        }
+    if isinstance(value, tuple):
+        return [_to_plain(v) for v in value]
+    return value
+
+
+# --------------------------------------------------------------------------------------------
+# Reference documentation
+# --------------------------------------------------------------------------------------------
+
+
+def _describe(tp: Any) -> str:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_describe(a) if a is not type(None) else "unset" for a in args)
+    if origin is Literal:
+        return " or ".join(f'"{a}"' for a in args)
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"list of {_describe(args[0])}"
+        return f"list of {len(args)} {_describe(args[0])}s"
+    if dataclasses.is_dataclass(tp):
+        return "table"
+    return {float: "number", int: "integer", bool: "boolean", str: "string"}.get(tp, str(tp))
+
+
+def _default_text(f: dataclasses.Field) -> str:
+    if f.default is not dataclasses.MISSING:
+        d = f.default
+    elif f.default_factory is not dataclasses.MISSING:
+        d = f.default_factory()
+    else:
+        return ""
+    if d is None:
+        return "unset"
+    if isinstance(d, bool):
+        return str(d).lower()
+    if isinstance(d, str):
+        return f'"{d}"'
+    if isinstance(d, tuple) and d and dataclasses.is_dataclass(d[0]):
+        return "one term with the defaults below"
+    if isinstance(d, tuple):
+        return "[" + ", ".join(f"{x:g}" for x in d) + "]"
+    if isinstance(d, float):
+        return f"{d:g}"
+    return str(d)
+
+
+def reference_markdown() -> str:
+    """The problem-file reference, generated from the declarations in this module."""
+    lines = [
+        "# Problem files",
+        "",
+        "<!-- generated from optlight/spec.py by `make docs`; do not edit by hand -->",
+        "",
+        "A problem file is TOML. Every key is optional; a missing key takes its default. Unknown keys,",
+        "wrong types and out-of-range values are errors that name the file and the key. Lengths are in",
+        "metres (`_m`), angles in degrees (`_deg`), paths relative to the problem file.",
+        "The built-in problems are in `problems/`; `optlight problems` lists them.",
+        "",
+    ]
+
+    def walk(cls: type, prefix: str) -> None:
+        hints = typing.get_type_hints(cls)
+        fields = [f for f in dataclasses.fields(cls) if not f.metadata.get("internal")]
+        scalars = [
+            f
+            for f in fields
+            if not (dataclasses.is_dataclass(hints[f.name]) or _is_table_list(hints[f.name]))
+        ]
+        title = f"`[{prefix}]`" if prefix else "Top level"
+        lines.extend([f"## {title}", "", " ".join((cls.__doc__ or "").split()), ""])
+        if scalars:
+            lines.extend(["| key | type | unit | default | range | meaning |", "|---|---|---|---|---|---|"])
+            for f in scalars:
+                m = f.metadata
+                rng = ""
+                if m.get("lo") is not None or m.get("hi") is not None:
+                    lo = "" if m.get("lo") is None else f"{'>' if m.get('lo_open') else '≥'} {m['lo']:g}"
+                    hi = "" if m.get("hi") is None else f"≤ {m['hi']:g}"
+                    rng = ", ".join(x for x in (lo, hi) if x)
+                lines.append(
+                    f"| `{f.name}` | {_describe(hints[f.name])} | {m.get('unit', '')} | {_default_text(f)} | {rng} | {m.get('doc', '')} |"
+                )
+            lines.append("")
+        for f in fields:
+            tp = hints[f.name]
+            sub = f"{prefix}.{f.name}" if prefix else f.name
+            if isinstance(tp, type) and dataclasses.is_dataclass(tp):
+                walk(tp, sub)
+            elif _is_table_list(tp):
+                lines.extend([f"`[[{sub}]]`: {f.metadata.get('doc', '')}", ""])
+                walk(typing.get_args(tp)[0], f"[{sub}]")
+
+    walk(Problem, "")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _is_table_list(tp: Any) -> bool:
+    args = typing.get_args(tp)
+    return typing.get_origin(tp) is tuple and len(args) == 2 and dataclasses.is_dataclass(args[0])
