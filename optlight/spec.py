@@ -294,7 +294,7 @@ class Problem:
         return (self.source.parent / path).resolve()
 
     def to_dict(self) -> dict[str, Any]:
-        """The problem as plain data (for plan.json): every key, defaults included."""
+        """The problem as plain data (for plan.json): every set key, defaults included."""
         return _to_plain(self)
 
 
@@ -497,10 +497,11 @@ def _check_consistency(p: Problem, file: str) -> None:
 
 def _to_plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        # Unset (None) keys are left out: TOML has no null, and a missing key means its default.
         return {
             f.name: _to_plain(getattr(value, f.name))
             for f in dataclasses.fields(value)
-            if not f.metadata.get("internal")
+            if not f.metadata.get("internal") and getattr(value, f.name) is not None
         }
     if isinstance(value, tuple):
         return [_to_plain(v) for v in value]

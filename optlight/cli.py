@@ -1,0 +1,65 @@
+"""The ``optlight`` command.
+
+Every subcommand takes PROBLEM as a path or the name of a file in ``problems/``. User mistakes
+(an invalid problem file, an unreachable landmark, a plan that fails verification) are printed in
+one line on stderr with exit status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+from optlight.errors import OptlightError
+from optlight.spec import available_problems, load_problem
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    problem = load_problem(args.problem)
+    print(f"{problem.source}: valid ({problem.description})")
+    return 0
+
+
+def _cmd_problems(args: argparse.Namespace) -> int:
+    problems = available_problems()
+    width = max((len(n) for n in problems), default=0)
+    for name, description in problems.items():
+        print(f"{name:<{width}}  {description}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser with one subparser per command."""
+    parser = argparse.ArgumentParser(
+        prog="optlight",
+        description="Camera-driven robotic light source positioning.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def add(name: str, func: Callable[[argparse.Namespace], int], help: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help, description=help)
+        p.set_defaults(func=func)
+        return p
+
+    p = add("check", _cmd_check, "validate a problem file")
+    p.add_argument("problem", help="problem file path or built-in name")
+    add("problems", _cmd_problems, "list the built-in problems")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except OptlightError as e:
+        print(f"optlight: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("optlight: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

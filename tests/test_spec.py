@@ -1,0 +1,189 @@
+"""Problem files: every built-in file loads; bad files raise ProblemError naming file and key."""
+
+from __future__ import annotations
+
+import copy
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from optlight.errors import ProblemError
+from optlight.spec import (
+    PROBLEMS_DIR,
+    available_problems,
+    load_problem,
+    problem_from_dict,
+    reference_markdown,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def default_dict() -> dict:
+    with (PROBLEMS_DIR / "default.toml").open("rb") as f:
+        return tomllib.load(f)
+
+
+def write_toml(path: Path, data: dict) -> Path:
+    """A minimal TOML writer for the value types problem files use."""
+
+    def value(v: object) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{" + ", ".join(f'"{k}" = {value(x)}' for k, x in v.items()) + "}"
+        return repr(v)
+
+    path.write_text("\n".join(f'"{k}" = {value(v)}' for k, v in data.items()) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("name", sorted(available_problems()))
+def test_builtin_problems_load(name: str) -> None:
+    problem = load_problem(name)
+    assert problem.name == name
+    assert problem.description, "every built-in problem has a one-line description"
+
+
+def test_defaults_fill_missing_keys(tmp_path: Path) -> None:
+    problem = load_problem(write_toml(tmp_path / "p.toml", {"description": "only this"}))
+    assert problem.light_sphere.radius_m == 0.40
+    assert problem.objective.terms[0].kind == "histogram"
+
+
+@pytest.mark.parametrize(
+    ("mutate", "key", "fragment"),
+    [
+        (lambda d: d["light_sphere"].update(radius_m=-0.1), "light_sphere.radius_m", "> 0"),
+        (lambda d: d["light_sphere"].update(zenith_max_deg=120.0), "light_sphere.zenith_max_deg", "≤ 90"),
+        (
+            lambda d: d["light_sphere"].update(zenith_min_deg=50.0, zenith_max_deg=40.0),
+            "light_sphere.zenith_max_deg",
+            "> zenith_min_deg",
+        ),
+        (lambda d: d["camera"].update(width=0), "camera.width", "≥ 1"),
+        (
+            lambda d: d["camera"].update(position_m=[0.45, -0.3, 0.35]),
+            "camera.position_m",
+            "outside the light sphere",
+        ),
+        (lambda d: d["camera"].update(look_at_m=[0.45, -2.0, 0.35]), "camera.look_at_m", "sees the object"),
+        (lambda d: d["light"].update(model="laser"), "light.model", "'directional', 'point'"),
+        (lambda d: d["light"].update(power="bright"), "light.power", "a finite number"),
+        (lambda d: d["camera"].update(fov_deg=True), "camera.fov_deg", "a finite number"),
+        (lambda d: d["object"].update(center_m=[0.0, 1.0]), "object.center_m", "list of 3"),
+        (lambda d: d["object"].update(colour="red"), "object.colour", "unknown key"),
+        (lambda d: d.update(extra={}), "extra", "unknown key"),
+        (lambda d: d["object"].update(kind="mesh"), "object.path", "mesh file path"),
+        (lambda d: d["objective"]["terms"][0].update(kind="mean"), "objective.terms[0].target", "target"),
+        (lambda d: d["robot"].update(urdf="nowhere.urdf", frame="tool0"), "robot.urdf", "existing URDF"),
+    ],
+)
+def test_bad_values_name_file_and_key(tmp_path: Path, mutate, key: str, fragment: str) -> None:
+    data = default_dict()
+    mutate(data)
+    path = write_toml(tmp_path / "bad.toml", data)
+    with pytest.raises(ProblemError) as err:
+        load_problem(path)
+    message = str(err.value)
+    assert err.value.key == key
+    assert str(path) in message and key in message and fragment in message
+
+
+def test_unknown_problem_lists_builtins() -> None:
+    with pytest.raises(ProblemError, match="default"):
+        load_problem("no_such_problem")
+
+
+def test_invalid_toml_is_a_problem_error(tmp_path: Path) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("[object\nkind = ")
+    with pytest.raises(ProblemError, match="valid TOML"):
+        load_problem(path)
+
+
+def test_docs_reference_is_up_to_date() -> None:
+    """docs/problems.md is generated from the declarations; `make docs` refreshes it."""
+    assert (ROOT / "docs" / "problems.md").read_text() == reference_markdown()
+
+
+def test_round_trip_through_plain_data() -> None:
+    problem = load_problem("default")
+    again = problem_from_dict(problem.to_dict(), source=problem.source)
+    assert again == problem
+
+
+def test_cli_prints_one_line_without_traceback(tmp_path: Path) -> None:
+    data = default_dict()
+    data["light_sphere"]["radius_m"] = -1.0
+    path = write_toml(tmp_path / "bad.toml", data)
+    run = subprocess.run(
+        [sys.executable, "-m", "optlight.cli", "check", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode != 0
+    assert "Traceback" not in run.stderr + run.stdout
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "light_sphere.radius_m" in lines[0]
+
+
+# --- mutation fuzzing: any mutation of a valid file gives a valid load or a clean ProblemError ---
+
+LEAVES = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**6), 10**6),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+    st.lists(st.floats(-2, 2, allow_nan=False), max_size=4),
+    st.just({}),
+)
+
+
+def _paths(data: object, prefix: tuple = ()) -> list[tuple]:
+    out = [prefix] if prefix else []
+    if isinstance(data, dict):
+        for k, v in data.items():
+            out += _paths(v, (*prefix, k))
+    elif isinstance(data, list):
+        for i, v in enumerate(data):
+            out += _paths(v, (*prefix, i))
+    return out
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_mutated_problem_files_fail_cleanly(data: st.DataObject) -> None:
+    problem = default_dict()
+    mutated = copy.deepcopy(problem)
+    for _ in range(data.draw(st.integers(1, 3))):
+        paths = _paths(mutated)
+        path = data.draw(st.sampled_from(paths))
+        parent = mutated
+        for k in path[:-1]:
+            parent = parent[k]
+        action = data.draw(st.sampled_from(["replace", "delete", "add"]))
+        if action == "delete" and isinstance(parent, dict):
+            del parent[path[-1]]
+        elif action == "add" and isinstance(parent, dict):
+            parent[data.draw(st.text(min_size=1, max_size=6))] = data.draw(LEAVES)
+        else:
+            leaf = data.draw(LEAVES)
+            if leaf is None:  # TOML has no null: None stands for an empty table
+                leaf = {}
+            parent[path[-1]] = leaf
+    try:
+        problem_from_dict(mutated)
+    except ProblemError as e:
+        assert e.key is not None and str(e)
