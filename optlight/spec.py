@@ -182,6 +182,15 @@ class TermSpec:
     weight: float = key(1.0, "weight of the term in the sum", lo=0.0)
     distance: Literal["l2", "chi2", "emd", "emd2"] = key("emd2", "histogram distance (kind = histogram)")
     target: float | None = key(None, "target mean or standard deviation (kind = mean | contrast)", lo=0.0)
+    level: float | None = key(
+        None,
+        "normalised luminance where a pixel counts as saturated or shadowed (default 0.98 | 0.05)",
+        lo=0.0,
+        hi=1.0,
+    )
+    softness: float = key(
+        0.01, "width τ of the sigmoid of the saturated or shadowed fraction", lo=0.0, lo_open=True
+    )
 
 
 @dataclass(frozen=True)

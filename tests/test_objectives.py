@@ -1,0 +1,166 @@
+"""Objectives: NumPy twin = CasADi value, CasADi gradient = finite differences of the NumPy twin,
+the soft histogram against hand-computed bins, references from images (PNG, NPY) round-trip."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from optlight.errors import OptlightError, ProblemError
+from optlight.objectives import (
+    ContrastTerm,
+    FractionTerm,
+    HistogramTerm,
+    ImageTerm,
+    MeanTerm,
+    Objective,
+    SoftHistogram,
+    Term,
+    histogram_distance_numpy,
+    read_image,
+    reference_from_bins,
+    reference_from_pixels,
+)
+
+P = 40
+HIST = SoftHistogram(bins=8, sigma_bins=1.0)
+
+
+def random_u(seed: int, p: int = P) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(0.02, 0.98, p)
+
+
+def all_terms() -> dict[str, Term]:
+    ref_u = random_u(100)
+    ref_h = HIST.numpy(ref_u)
+    terms: dict[str, Term] = {
+        f"histogram-{d}": HistogramTerm(HIST, ref_h, d) for d in ("l2", "chi2", "emd", "emd2")
+    }
+    terms.update(
+        image=ImageTerm(ref_u),
+        mean=MeanTerm(0.4),
+        contrast=ContrastTerm(0.15),
+        saturation=FractionTerm(0.9, 0.05, above=True),
+        shadow=FractionTerm(0.1, 0.05, above=False),
+    )
+    return terms
+
+
+TERMS = all_terms()
+
+
+def casadi_value_and_gradient(term: Term, u: np.ndarray) -> tuple[float, np.ndarray]:
+    x = ca.MX.sym("u", u.size)
+    f = term.casadi(x)
+    fun = ca.Function("f", [x], [f, ca.gradient(f, x)])
+    value, grad = fun(u)
+    return float(value), np.asarray(grad).ravel()
+
+
+@pytest.mark.parametrize("name", sorted(TERMS))
+def test_numpy_twin_equals_casadi(name: str) -> None:
+    term = TERMS[name]
+    for seed in range(3):
+        u = random_u(seed)
+        value, _ = casadi_value_and_gradient(term, u)
+        assert float(term.numpy(u)) == pytest.approx(value, rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("name", sorted(TERMS))
+def test_casadi_gradient_matches_finite_differences_of_numpy(name: str) -> None:
+    term = TERMS[name]
+    u = random_u(7)
+    _, grad = casadi_value_and_gradient(term, u)
+    eps = 1e-6
+    fd = np.empty(u.size)
+    for i in range(u.size):
+        e = np.zeros(u.size)
+        e[i] = eps
+        fd[i] = (float(term.numpy(u + e)) - float(term.numpy(u - e))) / (2 * eps)
+    scale = max(np.abs(fd).max(), 1e-12)
+    np.testing.assert_allclose(grad, fd, rtol=0, atol=1e-6 * scale)
+
+
+def test_numpy_terms_are_batched() -> None:
+    batch = np.stack([random_u(s) for s in range(4)])
+    for term in TERMS.values():
+        np.testing.assert_allclose(term.numpy(batch), [float(term.numpy(u)) for u in batch], rtol=1e-14)
+
+
+def test_soft_histogram_of_a_tiny_image_against_hand_computed_bins() -> None:
+    # 4 bins on [0, 1]: centres 1/8, 3/8, 5/8, 7/8, width 1/4, σ = ½ bin = 1/8. Pixels at 1/8, 3/8, 3/8, 1.
+    hist = SoftHistogram(bins=4, sigma_bins=0.5)
+    image = np.array([[0.125, 0.375], [0.375, 1.0]])
+    # (u − c)/σ per pixel and bin: 1/8 -> 0, 2, 4, 6; 3/8 -> −2, 0, 2, 4; 1 -> −7, −5, −3, −1.
+    k1 = [1.0, math.exp(-2), math.exp(-8), math.exp(-18)]
+    k3 = [math.exp(-2), 1.0, math.exp(-2), math.exp(-8)]
+    k8 = [math.exp(-24.5), math.exp(-12.5), math.exp(-4.5), math.exp(-0.5)]
+    raw = np.array([a + 2 * b + c for a, b, c in zip(k1, k3, k8, strict=True)]) / 4
+    np.testing.assert_allclose(hist.centres, [0.125, 0.375, 0.625, 0.875])
+    np.testing.assert_allclose(hist.numpy(image.ravel()), raw / raw.sum(), rtol=1e-14)
+    x = ca.MX.sym("u", 4)
+    np.testing.assert_allclose(
+        np.asarray(ca.Function("h", [x], [hist.casadi(x)])(image.ravel())).ravel(),
+        raw / raw.sum(),
+        rtol=1e-14,
+    )
+
+
+def test_distances_vanish_at_the_reference_and_emd_is_the_cdf_l1() -> None:
+    u = random_u(3)
+    h = HIST.numpy(u)
+    for d in ("l2", "chi2", "emd", "emd2"):
+        assert float(HistogramTerm(HIST, h, d).numpy(u)) == pytest.approx(0.0, abs=1e-15)
+    # Two point masses one bin apart: the CDFs differ by 1 on one bin, so EMD ≈ w = 1/K.
+    a, b = np.zeros(8), np.zeros(8)
+    a[2], b[3] = 1.0, 1.0
+    assert float(histogram_distance_numpy("emd", a, b)) == pytest.approx(1 / 8, rel=1e-3)
+    assert float(histogram_distance_numpy("emd2", a, b)) == pytest.approx(1 / 8)
+
+
+def test_objective_weights_selection_and_twins() -> None:
+    ref_pixels = random_u(11, 60)
+    selection = np.arange(0, 60, 3)
+    reference = reference_from_pixels(HIST, ref_pixels, selection, "synthetic")
+    terms = [(2.0, HistogramTerm(HIST, reference.histogram, "emd2")), (0.5, MeanTerm(0.3))]
+    objective = Objective(terms, reference, HIST, saturation=2.0)
+    pixels = 2.0 * random_u(12, 60)
+    u = pixels[selection] / 2.0
+    expected = 2.0 * float(terms[0][1].numpy(u)) + 0.5 * (u.mean() - 0.3) ** 2
+    assert objective.numpy(pixels) == pytest.approx(expected, rel=1e-14)
+    x = ca.MX.sym("I", 60)
+    assert float(ca.Function("f", [x], [objective.casadi(x)])(pixels)) == pytest.approx(expected, rel=1e-12)
+    # At the reference pixels the histogram term vanishes and only the mean term is left.
+    at_reference = 0.5 * (ref_pixels[selection].mean() - 0.3) ** 2
+    assert objective.numpy(2.0 * ref_pixels) == pytest.approx(at_reference, rel=1e-12)
+    with pytest.raises(OptlightError):
+        _ = objective.function  # no luminance model was given
+
+
+def test_reference_bins_are_renormalised() -> None:
+    ref = reference_from_bins([1.0, 3.0, 0.0, 4.0])
+    np.testing.assert_allclose(ref.histogram, [0.125, 0.375, 0.0, 0.5])
+    with pytest.raises(OptlightError):
+        reference_from_bins([0.0, 0.0])
+
+
+def test_read_image_png_npy_and_errors(tmp_path: Path) -> None:
+    from PIL import Image
+
+    values = np.linspace(0, 1, 12).reshape(3, 4)
+    Image.fromarray(np.round(values * 65535).astype(np.uint16)).save(tmp_path / "a16.png")
+    Image.fromarray(np.round(values * 255).astype(np.uint8)).save(tmp_path / "a8.png")
+    np.save(tmp_path / "a.npy", 2.0 * values)
+    np.testing.assert_allclose(read_image(tmp_path / "a16.png", 1.0), values, atol=1e-5)
+    np.testing.assert_allclose(read_image(tmp_path / "a8.png", 1.0), values, atol=3e-3)
+    np.testing.assert_allclose(read_image(tmp_path / "a.npy", 2.0), values)
+    (tmp_path / "bad.png").write_text("not an image")
+    with pytest.raises(ProblemError, match="objective.reference.image"):
+        read_image(tmp_path / "bad.png", 1.0, "p.toml", "objective.reference.image")
+    np.save(tmp_path / "cube.npy", np.zeros((2, 2, 2)))
+    with pytest.raises(ProblemError, match="shape"):
+        read_image(tmp_path / "cube.npy", 1.0, "p.toml", "objective.reference.image")
