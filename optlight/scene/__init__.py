@@ -1,0 +1,152 @@
+"""The scene: camera, object, G-buffer, and the two luminance models built on it (DESIGN §4).
+
+:class:`Scene` is what the objectives and the planners use::
+
+    scene = Scene.from_problem(problem, width=64, height=64)
+    image = scene.render(scene.sphere.position(0.3, 1.0))
+    f = scene.luminance()                      # casadi.Function (a, v) -> I
+    I = f(a, scene.visibility(a))
+
+Pixel vectors (P,) follow ``scene.gbuffer.pixel_index`` (row-major object pixels).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import casadi as ca
+import numpy as np
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.errors import ProblemError
+from optlight.geometry import LightSphere
+from optlight.scene.camera import Camera
+from optlight.scene.gbuffer import GBuffer, build_gbuffer, intersector, shadow_visibility
+from optlight.scene.luminance import luminance_function
+from optlight.scene.objects import SceneObject, build_object
+from optlight.scene.render import shade, to_image
+from optlight.spec import LightSpec, Problem
+
+Array = NDArray[np.float64]
+
+__all__ = ["Camera", "GBuffer", "Scene", "SceneObject"]
+
+#: Offset of shadow-ray origins along the normal, as a fraction of the mesh's bounding-box diagonal.
+SHADOW_EPSILON = 1e-5
+
+
+class Scene:
+    """A problem's camera, light sphere, object (world frame) and G-buffer, built once.
+
+    Attributes: ``problem``, ``camera`` (:class:`Camera`), ``sphere`` (:class:`LightSphere`),
+    ``object`` (:class:`SceneObject`), ``mesh`` (trimesh, world frame, m), ``albedo`` (V,) per
+    vertex, ``light`` (:class:`LightSpec`), ``gbuffer`` (:class:`GBuffer`).
+    """
+
+    def __init__(self, problem: Problem, camera: Camera, obj: SceneObject) -> None:
+        """Check that the object lies inside the light sphere, then cast the primary rays.
+
+        Raises :class:`ProblemError` with key ``light_sphere.radius_m`` when a vertex is at b or
+        farther from O (the light could not circle the object), and key ``camera`` when no pixel
+        sees the object.
+        """
+        self.problem = problem
+        self.camera = camera
+        self.sphere = LightSphere.from_problem(problem)
+        self.object = obj
+        self.mesh: trimesh.Trimesh = obj.mesh
+        self.albedo: Array = obj.albedo
+        self.light: LightSpec = problem.light
+        file = str(problem.source) if problem.source else "<inline>"
+        extent = float(np.max(np.linalg.norm(obj.mesh.vertices - self.sphere.center, axis=1)))
+        if extent >= self.sphere.radius:
+            raise ProblemError(
+                file,
+                "light_sphere.radius_m",
+                f"a light sphere around the whole object (radius > {extent:.3f} m, the farthest "
+                "object point from object.center_m)",
+                self.sphere.radius,
+            )
+        self._caster = intersector(obj.mesh)
+        self.gbuffer: GBuffer = build_gbuffer(camera, obj, self._caster)
+        if self.gbuffer.size == 0:
+            raise ProblemError(
+                file,
+                "camera",
+                "a camera that sees the object (no pixel ray hits it)",
+                camera.position.tolist(),
+            )
+        self._shadow_epsilon = SHADOW_EPSILON * float(obj.mesh.scale)
+        self._luminance: dict[bool, ca.Function] = {}
+
+    @classmethod
+    def from_problem(cls, problem: Problem, width: int | None = None, height: int | None = None) -> Scene:
+        """The scene of a problem, optionally at another resolution.
+
+        Giving ``width`` and/or ``height`` resamples the same view: fx, fy scale by W'/W, H'/H and
+        the principal point by c' = (c + ½)·W'/W − ½ (pixel centres at integers); a missing one
+        keeps the aspect ratio.
+        """
+        obj = build_object(problem)
+        camera = Camera.from_spec(problem.camera, problem.object.center_m)
+        if width is not None or height is not None:
+            w0, h0 = camera.width, camera.height
+            w = int(width) if width is not None else max(1, round(w0 * int(height or h0) / h0))
+            h = int(height) if height is not None else max(1, round(h0 * w / w0))
+            sx, sy = w / w0, h / h0
+            camera = dataclasses.replace(
+                camera,
+                fx=camera.fx * sx,
+                fy=camera.fy * sy,
+                cx=(camera.cx + 0.5) * sx - 0.5,
+                cy=(camera.cy + 0.5) * sy - 0.5,
+                width=w,
+                height=h,
+            )
+        return cls(problem, camera, obj)
+
+    def visibility(self, light_position: ArrayLike) -> Array:
+        """Cast-shadow visibility v (P,) in {0., 1.} for a light at ``light_position`` (world, m),
+        from shadow rays (:func:`optlight.scene.gbuffer.shadow_visibility`); all ones when
+        ``light.cast_shadows`` is false."""
+        if not self.light.cast_shadows:
+            return np.ones(self.gbuffer.size)
+        return shadow_visibility(
+            self._caster,
+            self.gbuffer,
+            light_position,
+            self.light.model,
+            self.sphere.center,
+            self._shadow_epsilon,
+        )
+
+    def pixels(
+        self,
+        light_position: ArrayLike,
+        visibility: ArrayLike | None = None,
+        noise: bool | np.random.Generator = False,
+    ) -> Array:
+        """Object pixel values I (P,) from the NumPy renderer (:func:`optlight.scene.render.shade`);
+        ``visibility`` None computes it with :meth:`visibility`."""
+        v = self.visibility(light_position) if visibility is None else visibility
+        return shade(
+            self.gbuffer, light_position, self.light, self.sphere.center, self.sphere.radius, v, noise
+        )
+
+    def render(self, light_position: ArrayLike, noise: bool | np.random.Generator = False) -> Array:
+        """The (H, W) image for a light at ``light_position``, background 0, shadows included."""
+        return self.to_image(self.pixels(light_position, noise=noise))
+
+    def to_image(self, pixels: ArrayLike) -> Array:
+        """The (H, W) image holding ``pixels`` (P,) at the object pixels, 0 elsewhere."""
+        return to_image(self.gbuffer, pixels)
+
+    def luminance(self, smooth: bool = True) -> ca.Function:
+        """The CasADi Function (a, v) -> I of :func:`optlight.scene.luminance.luminance_function`,
+        built on first use and cached per ``smooth``."""
+        if smooth not in self._luminance:
+            self._luminance[smooth] = luminance_function(
+                self.gbuffer, self.light, self.sphere.center, self.sphere.radius, smooth
+            )
+        return self._luminance[smooth]
