@@ -11,6 +11,8 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from optlight.errors import OptlightError
 from optlight.spec import available_problems, load_problem
 
@@ -18,6 +20,19 @@ from optlight.spec import available_problems, load_problem
 def _cmd_check(args: argparse.Namespace) -> int:
     problem = load_problem(args.problem)
     print(f"{problem.source}: valid ({problem.description})")
+    return 0
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from optlight.scene import Scene
+    from optlight.viz.images import save_gray_png
+
+    problem = load_problem(args.problem)
+    scene = Scene.from_problem(problem)
+    position = scene.sphere.position(np.deg2rad(args.zenith), np.deg2rad(args.azimuth))
+    image = scene.render(position, noise=problem.light.noise_std > 0)
+    path = save_gray_png(args.out, image, problem.light.saturation)
+    print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
     return 0
 
 
@@ -44,6 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("check", _cmd_check, "validate a problem file")
     p.add_argument("problem", help="problem file path or built-in name")
+    p = add("render", _cmd_render, "render the camera image for one light position")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--zenith", type=float, required=True, help="light zenith, degrees from the camera axis")
+    p.add_argument("--azimuth", type=float, required=True, help="light azimuth, degrees (90 = from above)")
+    p.add_argument("--out", required=True, help="output PNG file")
     add("problems", _cmd_problems, "list the built-in problems")
     return parser
 
