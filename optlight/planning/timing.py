@@ -1,0 +1,527 @@
+"""Time-optimal timing of a joint-space path through the landmarks (DESIGN §6), with TOPPRA.
+
+This is the only module of optlight that imports ``toppra`` (upstream may drop its Python package);
+everything else sees a :class:`Trajectory`.
+
+The path is given as segments: segment i is a (K_i, n) array of joint waypoints from landmark i to
+landmark i+1, consecutive segments sharing their end and start point. The robot
+
+1. dwells ``dwell_s`` at landmark 0 (the exposure),
+2. moves along segment 0, starting and ending at rest (zero joint velocity),
+3. dwells at landmark 1, … , moves along the last segment, dwells at the last landmark.
+
+Geometric path of a segment: the cubic spline q(s) (not-a-knot) through the waypoints q_k, over the
+cumulative chord parameter s_0 = 0, s_k = s_{k-1} + |q_k − q_{k-1}|₂ (rad). The spline interpolates
+the waypoints but may bulge slightly beyond them between knots; nothing here knows the joint position
+limits, so :func:`optlight.verify.verify_trajectory` is what checks them.
+
+Timing of a segment: TOPPRA (reachability analysis, seidel solver) maximises the path speed ṡ subject
+to |q'(s) ṡ| ≤ v_max and |q''(s) ṡ² + q'(s) s̈| ≤ a_max at the gridpoints s_0 < … < s_N, with
+ṡ = 0 at both ends, and ``ParametrizeConstAccel`` turns the result into a trajectory with constant
+s̈ = u_i on each interval, so ṡ² = x(s) is linear in s there:
+
+    x(s) = x_i + 2 u_i (s − s_i),   q̇ = q'(s) √x(s),   q̈ = q''(s) x(s) + q'(s) u_i.
+
+The limits hold at the gridpoints by construction but can be exceeded between them (by up to a few
+per cent on a coarse grid: q' and q'' vary inside an interval). We therefore probe every interval at
+s-fractions 1/8, 2/8, …, 7/8 with the formulas above, halve every interval where a limit is exceeded
+by more than :data:`LIMIT_SLACK` and time the segment again, at most :data:`MAX_REFINEMENTS` times.
+On random paths the dense-resampled excess then stays near 1e-4.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
+from numpy.typing import ArrayLike, NDArray
+from toppra.interpolator import propose_gridpoints
+
+from optlight.errors import SolverError
+
+Array = NDArray[np.float64]
+
+#: Relative excess over a velocity or acceleration limit accepted between gridpoints (the
+#: verification allows 1e-3).
+LIMIT_SLACK = 1e-4
+#: Largest number of times the grid of a segment is refined where the limits are exceeded.
+MAX_REFINEMENTS = 6
+#: Waypoints closer than this (rad, Euclidean in joint space) are merged; a segment whose waypoints
+#: all coincide has no motion.
+MERGE_DISTANCE = 1e-9
+#: Largest gap (rad, any joint) allowed between the end of a segment and the start of the next.
+JOINT_TOLERANCE = 1e-9
+
+#: Times (s) closer than this are one instant when sampling (the CSV writes nanoseconds).
+TIME_RESOLUTION = 1e-6
+
+_PROBE_FRACTIONS = np.arange(1, 8) / 8
+
+logging.getLogger("toppra").setLevel(logging.ERROR)
+
+
+# --------------------------------------------------------------------------------------------
+# Pieces: a trajectory is a sequence of pieces, each evaluated in its own local time [0, duration]
+# --------------------------------------------------------------------------------------------
+
+
+class _Piece(Protocol):
+    @property
+    def duration(self) -> float:
+        """Length (s) of the piece."""
+        ...
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        """q, q̇, q̈ at local times t ∈ [0, duration], each (T, n)."""
+        ...
+
+
+@dataclass(frozen=True)
+class _Hold:
+    """Standing still at q (a dwell)."""
+
+    q: Array
+    duration: float
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        q = np.broadcast_to(self.q, (t.size, self.q.size)).copy()
+        return q, np.zeros_like(q), np.zeros_like(q)
+
+
+class _Motion:
+    """One segment timed by TOPPRA: the path q(s) and the ``ParametrizeConstAccel`` parametrization
+    of the gridpoints s_i and path speeds ṡ_i = v_i, evaluated vectorised:
+
+        t_{i+1} = t_i + 2 Δ_i / (v_i + v_{i+1}),   u_i = (v_{i+1}² − v_i²) / (2 Δ_i),
+        on [t_i, t_{i+1}]: ṡ = v_i + u_i τ, s = s_i + v_i τ + u_i τ²/2  (τ = t − t_i),
+        q = q(s), q̇ = q'(s) ṡ, q̈ = q''(s) ṡ² + q'(s) u_i.
+
+    ``reference`` is toppra's own ``ParametrizeConstAccel`` trajectory (same values, evaluated one
+    time at a time in Python); the tests compare the two.
+    """
+
+    def __init__(
+        self, path: toppra.SplineInterpolator, gridpoints: Array, speeds: Array, reference: object
+    ) -> None:
+        self.path = path
+        self.s = np.asarray(gridpoints, float)
+        self.v = np.asarray(speeds, float)
+        ds = np.diff(self.s)
+        self.u = (self.v[1:] ** 2 - self.v[:-1] ** 2) / (2 * ds)
+        self.t = np.concatenate([[0.0], np.cumsum(2 * ds / (self.v[:-1] + self.v[1:]))])
+        self.reference = reference
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1])
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.u.size - 1)
+        tau = t - self.t[i]
+        u = self.u[i]
+        sd = self.v[i] + u * tau
+        s = np.clip(self.s[i] + self.v[i] * tau + 0.5 * u * tau**2, self.s[0], self.s[-1])
+        d1 = self.path(s, 1)
+        return self.path(s, 0), d1 * sd[:, None], self.path(s, 2) * (sd**2)[:, None] + d1 * u[:, None]
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """Samples (t_k, q_k, q̇_k, q̈_k), each quantity interpolated linearly between them."""
+
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        tt = t + self.t[0]
+        i = np.clip(np.searchsorted(self.t, tt, side="right") - 1, 0, self.t.size - 2)
+        w = ((tt - self.t[i]) / (self.t[i + 1] - self.t[i]))[:, None]
+        q, qd, qdd = (a[i] * (1 - w) + a[i + 1] * w for a in (self.q, self.qd, self.qdd))
+        return q, qd, qdd
+
+
+@dataclass(frozen=True)
+class _Scaled:
+    """A piece run ``factor`` times slower: q(t) = q_p(t/f), q̇ = q̇_p/f, q̈ = q̈_p/f²."""
+
+    piece: _Piece
+    factor: float
+
+    @property
+    def duration(self) -> float:
+        return self.piece.duration * self.factor
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        q, qd, qdd = self.piece.evaluate(t / self.factor)
+        return q, qd / self.factor, qdd / self.factor**2
+
+
+# --------------------------------------------------------------------------------------------
+# Trajectory
+# --------------------------------------------------------------------------------------------
+
+
+class Trajectory:
+    """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark.
+
+    Attributes (all times in seconds from the start):
+        landmark_intervals: (M, 2) start and end of the dwell at each landmark.
+        capture_times: (M,) middle of each dwell, when the image is exposed.
+        segment_times: (M−1, 2) start and end of the motion from landmark i to landmark i+1
+            (start = end for a segment without motion).
+        joint_names: names of the n joints, or None.
+
+    Build one with :func:`time_parameterize` or :meth:`from_csv`.
+    """
+
+    def __init__(
+        self,
+        pieces: Sequence[_Piece],
+        landmark_intervals: ArrayLike,
+        segment_times: ArrayLike,
+        joint_names: Sequence[str] | None = None,
+    ) -> None:
+        if not pieces:
+            raise ValueError("a trajectory needs at least one piece")
+        self._pieces = tuple(pieces)
+        self._starts = np.concatenate([[0.0], np.cumsum([p.duration for p in self._pieces])])
+        self._dof = int(self._pieces[0].evaluate(np.zeros(1))[0].shape[1])
+        self.landmark_intervals: Array = np.asarray(landmark_intervals, float).reshape(-1, 2)
+        self.segment_times: Array = np.asarray(segment_times, float).reshape(-1, 2)
+        if joint_names is not None and len(joint_names) != self._dof:
+            raise ValueError(f"{len(joint_names)} joint names for a trajectory of {self._dof} joints")
+        self.joint_names: tuple[str, ...] | None = None if joint_names is None else tuple(joint_names)
+
+    @property
+    def duration(self) -> float:
+        """Total time (s), dwells included."""
+        return float(self._starts[-1])
+
+    @property
+    def dof(self) -> int:
+        """Number n of joints."""
+        return self._dof
+
+    @property
+    def capture_times(self) -> Array:
+        """(M,) exposure times (s): the middle of each landmark's dwell."""
+        return self.landmark_intervals.mean(axis=1)
+
+    @property
+    def boundaries(self) -> Array:
+        """Sorted times (s) where a dwell or a motion starts or ends, 0 and duration included; times
+        closer than :data:`TIME_RESOLUTION` are merged."""
+        times = np.concatenate(
+            [[0.0, self.duration], self.landmark_intervals.ravel(), self.segment_times.ravel()]
+        )
+        return _distinct(times)
+
+    def sample_times(self, rate_hz: float) -> Array:
+        """Times k/rate_hz from 0 to the end, plus :attr:`boundaries`; a uniform time closer than
+        :data:`TIME_RESOLUTION` to a boundary gives way to the boundary."""
+        if not rate_hz > 0:
+            raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+        uniform = np.arange(int(np.floor(self.duration * rate_hz + 1e-9)) + 1) / rate_hz
+        edges = self.boundaries
+        padded = np.concatenate([[-np.inf], edges, [np.inf]])
+        i = np.searchsorted(padded, uniform)
+        gap = np.minimum(uniform - padded[i - 1], padded[i] - uniform)
+        return np.sort(np.concatenate([uniform[gap > TIME_RESOLUTION], edges]))
+
+    def sample(self, t: ArrayLike) -> tuple[Array, Array, Array]:
+        """Joint positions q (rad), velocities q̇ (rad/s), accelerations q̈ (rad/s²) at times t (s).
+
+        ``t`` is a scalar or a 1-D array in [0, duration]; each result has shape (T, n). At a time
+        where two pieces meet, the later piece is evaluated (q and q̇ are continuous there, q̈ is not).
+        """
+        times = np.atleast_1d(np.asarray(t, float))
+        if times.ndim != 1:
+            raise ValueError(f"times must be a scalar or a 1-D array, got shape {times.shape}")
+        if times.size and (
+            times.min() < -1e-9 or times.max() > self.duration + 1e-9 or np.isnan(times).any()
+        ):
+            raise ValueError(f"times must lie in [0, {self.duration:.6g}] s")
+        out = [np.empty((times.size, self._dof)) for _ in range(3)]
+        index = np.clip(np.searchsorted(self._starts, times, side="right") - 1, 0, len(self._pieces) - 1)
+        for k in np.unique(index):
+            sel = index == k
+            piece = self._pieces[k]
+            local = np.clip(times[sel] - self._starts[k], 0.0, piece.duration)
+            for o, v in zip(out, piece.evaluate(local), strict=True):
+                o[sel] = v
+        return out[0], out[1], out[2]
+
+    def time_scaled(self, factor: float) -> Trajectory:
+        """The same motion with every time multiplied by ``factor`` (> 0): q_f(t) = q(t/factor),
+        so velocities are divided by factor and accelerations by factor². factor < 1 is faster."""
+        if not factor > 0:
+            raise ValueError(f"factor must be positive, got {factor}")
+        return Trajectory(
+            [_Scaled(p, factor) for p in self._pieces],
+            self.landmark_intervals * factor,
+            self.segment_times * factor,
+            self.joint_names,
+        )
+
+    def to_csv(
+        self, path: str | Path, joint_names: Sequence[str] | None = None, *, rate_hz: float = 100.0
+    ) -> Path:
+        """Write the trajectory sampled at :meth:`sample_times` (``rate_hz`` plus the boundaries).
+
+        Columns: ``t`` (s), then ``q_<joint>`` (rad) for every joint, then ``qd_<joint>`` (rad/s),
+        then ``qdd_<joint>`` (rad/s²). Joint names default to :attr:`joint_names`, else j0, j1, ….
+        """
+        names = _joint_names(joint_names if joint_names is not None else self.joint_names, self._dof)
+        t = self.sample_times(rate_hz)
+        q, qd, qdd = self.sample(t)
+        header = ["t"] + [f"{p}_{n}" for p in ("q", "qd", "qdd") for n in names]
+        path = Path(path)
+        with path.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(header)
+            for row_t, row in zip(t, np.hstack([q, qd, qdd]), strict=True):
+                writer.writerow([f"{row_t:.9f}", *(f"{v:.12g}" for v in row)])
+        return path
+
+    @classmethod
+    def from_csv(cls, path: str | Path, *, landmark_intervals: ArrayLike | None = None) -> Trajectory:
+        """Read a file written by :meth:`to_csv`; q, q̇, q̈ are interpolated linearly between rows.
+
+        The file does not record the dwells: pass ``landmark_intervals`` (M, 2) (e.g. from plan.json)
+        to restore them; :attr:`segment_times` are then the gaps between consecutive dwells.
+        """
+        path = Path(path)
+        with path.open(newline="") as f:
+            header = next(csv.reader(f), None)
+        if not header or header[0] != "t":
+            raise ValueError(
+                f"{path}: the first column must be 't', got {header[:1] if header else 'nothing'}"
+            )
+        columns: dict[str, list[str]] = {"q": [], "qd": [], "qdd": []}
+        for name in header[1:]:
+            prefix = next((p for p in ("qdd", "qd", "q") if name.startswith(p + "_")), None)
+            if prefix is None:
+                raise ValueError(f"{path}: column {name!r} is not q_<joint>, qd_<joint> or qdd_<joint>")
+            columns[prefix].append(name[len(prefix) + 1 :])
+        names = columns["q"]
+        if not names or columns["qd"] != names or columns["qdd"] != names:
+            raise ValueError(
+                f"{path}: the q_, qd_ and qdd_ columns must name the same joints in the same order"
+            )
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        t = data[:, 0]
+        if t.size < 2 or np.any(np.diff(t) <= 0) or abs(t[0]) > 1e-9:
+            raise ValueError(f"{path}: times must start at 0 and increase strictly (at least two rows)")
+        n = len(names)
+        index = {"q": header.index(f"q_{names[0]}")}
+        index["qd"], index["qdd"] = header.index(f"qd_{names[0]}"), header.index(f"qdd_{names[0]}")
+        piece = _Samples(t, *(data[:, index[p] : index[p] + n] for p in ("q", "qd", "qdd")))
+        if landmark_intervals is None:
+            intervals = np.zeros((0, 2))
+        else:
+            intervals = np.asarray(landmark_intervals, float).reshape(-1, 2)
+        segments = np.column_stack([intervals[:-1, 1], intervals[1:, 0]])
+        return cls([piece], intervals, segments, names)
+
+
+def _distinct(times: Array, tol: float = TIME_RESOLUTION) -> Array:
+    """Sorted times with values closer than ``tol`` merged (the earliest kept)."""
+    t = np.sort(np.asarray(times, float))
+    return t[np.concatenate([[True], np.diff(t) > tol])] if t.size else t
+
+
+def _joint_names(names: Sequence[str] | None, n: int) -> list[str]:
+    if names is None:
+        return [f"j{i}" for i in range(n)]
+    names = list(names)
+    if len(names) != n:
+        raise ValueError(f"{len(names)} joint names for {n} joints")
+    for name in names:
+        if not name or any(c in name for c in ',"\n\r'):
+            raise ValueError(f"joint name {name!r} cannot be a CSV column name")
+    return names
+
+
+# --------------------------------------------------------------------------------------------
+# Timing
+# --------------------------------------------------------------------------------------------
+
+
+def time_parameterize(
+    segments: Sequence[ArrayLike],
+    velocity_limit: ArrayLike,
+    acceleration_limit: ArrayLike,
+    dwell_s: float,
+    *,
+    gridpoints: int | None = None,
+    joint_names: Sequence[str] | None = None,
+) -> Trajectory:
+    """Time the path through the landmarks: rest at every landmark for ``dwell_s`` (s), and move
+    along each segment time-optimally under |q̇_j| ≤ velocity_limit_j (rad/s) and
+    |q̈_j| ≤ acceleration_limit_j (rad/s²), starting and ending at rest (module docstring).
+
+    Args:
+        segments: M−1 arrays of shape (K_i ≥ 2, n), joint waypoints (rad) from landmark i to i+1;
+            segment i ends where segment i+1 starts (within :data:`JOINT_TOLERANCE`). A segment
+            whose waypoints all coincide gets zero motion time.
+        velocity_limit, acceleration_limit: (n,) positive limits.
+        dwell_s: time (s) the robot stays at each landmark, the first and the last included.
+        gridpoints: initial number of TOPPRA gridpoints per segment (uniform in s); default: chosen
+            by toppra from the path curvature (at least 100). The spline knots are always added and
+            the grid is refined where the limits are exceeded between gridpoints.
+        joint_names: names of the n joints, kept on the trajectory.
+
+    Raises:
+        ValueError: inconsistent shapes, non-finite values, segments that do not join, bad limits.
+        SolverError: TOPPRA failed on a segment (its index and TOPPRA's return code are named), or
+            the limits could not be kept between gridpoints after refinement.
+    """
+    waypoints = [np.asarray(s, float) for s in segments]
+    if not waypoints:
+        raise ValueError("at least one segment is needed")
+    n = waypoints[0].shape[1] if waypoints[0].ndim == 2 else 0
+    for i, w in enumerate(waypoints):
+        if w.ndim != 2 or w.shape[0] < 2 or w.shape[1] != n or n == 0:
+            raise ValueError(f"segment {i}: expected a (K ≥ 2, {n}) array of waypoints, got shape {w.shape}")
+        if not np.isfinite(w).all():
+            raise ValueError(f"segment {i}: waypoints are not finite")
+    for i in range(len(waypoints) - 1):
+        gap = float(np.max(np.abs(waypoints[i][-1] - waypoints[i + 1][0])))
+        if gap > JOINT_TOLERANCE:
+            raise ValueError(
+                f"segment {i} ends at {waypoints[i][-1]} but segment {i + 1} starts at "
+                f"{waypoints[i + 1][0]} (gap {gap:.3g} rad)"
+            )
+    vmax = _positive_limits(velocity_limit, n, "velocity_limit")
+    amax = _positive_limits(acceleration_limit, n, "acceleration_limit")
+    if not (np.isfinite(dwell_s) and dwell_s >= 0):
+        raise ValueError(f"dwell_s must be a finite non-negative number, got {dwell_s}")
+    if gridpoints is not None and gridpoints < 2:
+        raise ValueError(f"gridpoints must be at least 2, got {gridpoints}")
+
+    pieces: list[_Piece] = [_Hold(waypoints[0][0], float(dwell_s))]
+    intervals = [(0.0, float(dwell_s))]
+    seg_times = []
+    t = float(dwell_s)
+    for i, w in enumerate(waypoints):
+        motion = _time_segment(i, w, vmax, amax, gridpoints)
+        if motion is not None:
+            pieces.append(motion)
+        start, t = t, t + (motion.duration if motion is not None else 0.0)
+        seg_times.append((start, t))
+        pieces.append(_Hold(w[-1], float(dwell_s)))
+        intervals.append((t, t + dwell_s))
+        t += dwell_s
+    return Trajectory(pieces, intervals, seg_times, joint_names)
+
+
+def _positive_limits(value: ArrayLike, n: int, name: str) -> Array:
+    lim = np.asarray(value, float)
+    if lim.shape not in ((), (n,)) or not (np.isfinite(lim).all() and (lim > 0).all()):
+        raise ValueError(f"{name} must be one or {n} finite positive numbers, got {lim}")
+    return np.broadcast_to(lim, (n,)).copy()
+
+
+def _chord_path(waypoints: Array) -> tuple[Array, Array] | None:
+    """Waypoints with near-duplicates merged and their cumulative chord parameter s (rad), or None
+    when all waypoints coincide. The last waypoint is kept exactly."""
+    kept = [waypoints[0]]
+    for q in waypoints[1:]:
+        if np.linalg.norm(q - kept[-1]) > MERGE_DISTANCE:
+            kept.append(q)
+    if len(kept) == 1:
+        return None
+    kept[-1] = waypoints[-1]
+    w = np.array(kept)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+    return s, w
+
+
+def _time_segment(
+    index: int, waypoints: Array, vmax: Array, amax: Array, gridpoints: int | None
+) -> _Motion | None:
+    """TOPPRA on one segment, rest to rest, with the grid refined until the limits hold between
+    gridpoints (module docstring); None for a segment without motion."""
+    chord = _chord_path(waypoints)
+    if chord is None:
+        return None
+    s, w = chord
+    path = toppra.SplineInterpolator(s, w)
+    try:
+        if gridpoints is None:
+            grid = np.asarray(propose_gridpoints(path, max_err_threshold=1e-3, min_nb_points=100), float)
+        else:
+            grid = np.linspace(0.0, s[-1], gridpoints)
+    except ValueError as e:
+        raise SolverError(f"segment {index}: toppra could not choose gridpoints ({e})") from e
+    grid = _distinct(np.concatenate([grid, s]), tol=1e-12)
+    grid[-1] = s[-1]
+    constraints = [
+        toppra.constraint.JointVelocityConstraint(vmax),
+        toppra.constraint.JointAccelerationConstraint(amax),
+    ]
+    for attempt in range(MAX_REFINEMENTS + 1):
+        try:
+            algorithm = toppra.algorithm.TOPPRA(
+                constraints,
+                path,
+                gridpoints=grid,
+                solver_wrapper="seidel",
+                parametrizer="ParametrizeConstAccel",
+            )
+            output = algorithm.compute_trajectory(0.0, 0.0)
+        except Exception as e:  # toppra raises ValueError, AssertionError, ToppraError, …
+            raise SolverError(f"segment {index}: TOPPRA raised {type(e).__name__}: {e}") from e
+        data = algorithm.problem_data
+        if output is None or data.sd_vec is None or not np.isfinite(data.sd_vec).all():
+            raise SolverError(
+                f"segment {index}: TOPPRA failed ({data.return_code.value}) on a path of {len(w)} waypoints "
+                f"and {len(grid)} gridpoints; check the limits and that the waypoints are not degenerate"
+            )
+        excess = _interval_excess(path, grid, np.asarray(data.sd_vec, float) ** 2, vmax, amax)
+        bad = excess > LIMIT_SLACK
+        if not bad.any():
+            motion = _Motion(path, grid, np.asarray(data.sd_vec, float), output)
+            if not np.isclose(motion.duration, float(output.duration), rtol=1e-9, atol=1e-12):
+                raise SolverError(
+                    f"segment {index}: toppra's ParametrizeConstAccel lasts {output.duration} s, "
+                    f"its re-evaluation {motion.duration} s (toppra changed?)"
+                )
+            return motion
+        if attempt < MAX_REFINEMENTS:
+            grid = np.sort(np.concatenate([grid, 0.5 * (grid[:-1] + grid[1:])[bad]]))
+    raise SolverError(
+        f"segment {index}: the timed path exceeds the joint limits by {excess.max():.2%} between gridpoints "
+        f"after {MAX_REFINEMENTS} refinements ({len(grid)} gridpoints); the path is too sharp — add waypoints"
+    )
+
+
+def _interval_excess(
+    path: toppra.SplineInterpolator, grid: Array, x: Array, vmax: Array, amax: Array
+) -> Array:
+    """Per grid interval: max over probes and joints of max(|q̇|/v_max, |q̈|/a_max) − 1 for the
+    constant-s̈ parametrization x(s) = ṡ² linear between gridpoints."""
+    ds = np.diff(grid)
+    u = (x[1:] - x[:-1]) / (2 * ds)
+    s = grid[:-1, None] + ds[:, None] * _PROBE_FRACTIONS  # (N, P)
+    xs = np.maximum(x[:-1, None] + 2 * u[:, None] * (s - grid[:-1, None]), 0.0)
+    d1 = path(s.ravel(), 1).reshape(*s.shape, -1)
+    d2 = path(s.ravel(), 2).reshape(*s.shape, -1)
+    qd = d1 * np.sqrt(xs)[..., None]
+    qdd = d2 * xs[..., None] + d1 * u[:, None, None]
+    ratio = np.maximum(np.abs(qd) / vmax, np.abs(qdd) / amax)
+    return ratio.max(axis=(1, 2)) - 1.0
