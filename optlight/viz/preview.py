@@ -1,0 +1,464 @@
+"""Meshcat preview of a plan: the robot, the shaded object, the light sphere, the landmarks, the
+light path, the camera with its frustum and the light, with the timed trajectory as an animation.
+
+The scene is built once, as meshcat commands kept in a scene tree (the one meshcat's server keeps),
+so it can be written as one self-contained HTML file (:meth:`Preview.static_html`, no server: the
+viewer's JavaScript, the meshes and the animation are inlined) or served live
+(:meth:`Preview.serve`, a meshcat server on 127.0.0.1 that ends with the ``with`` block)::
+
+    preview = Preview(scene, robot, landmarks, costs, path, trajectory)
+    preview.save_html("plan.html")
+    with preview.serve() as url:
+        input(f"open {url}, then press Enter")
+
+What is drawn (node paths under ``/meshcat``, see the ``*_NODE`` constants):
+
+- ``robot``: pinocchio's ``MeshcatVisualizer`` with the robot's visual meshes; UR robots with their
+  collision meshes (their COLLADA visuals render broken in meshcat, DESIGN §7);
+- ``object``: the object mesh, unlit, coloured by the luminance model of DESIGN §4 evaluated per
+  vertex (no cast shadows) for the light at ``light_position``, as a grey level (white = saturation);
+- ``light_sphere``: the sphere of radius b around O, transparent;
+- ``landmarks/NNN``: one small sphere per landmark, coloured by its cost (viridis, low = dark);
+- ``path``: a line through the light positions of the planned path;
+- ``camera``: the camera body and its frustum (lines from the centre to the image corners, at the
+  object's depth);
+- ``light``: the light frame (animated), a bulb at its origin and a cone along its +z axis.
+
+With a trajectory, an animation (``fps`` frames per second, the last frame at the trajectory's
+end) moves the robot's links and the light; it plays once when the page opens and can be replayed
+or scrubbed in the viewer's "Animations" panel.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Protocol
+
+import matplotlib
+import meshcat
+import meshcat.geometry as mg
+import numpy as np
+import pinocchio as pin
+import trimesh
+import umsgpack
+from meshcat.animation import Animation
+from meshcat.servers.tree import SceneTree, find_node
+from meshcat.servers.zmqserver import VIEWER_ROOT
+from numpy.typing import ArrayLike, NDArray
+from pinocchio.visualize import MeshcatVisualizer
+
+from optlight.geometry import LightSphere
+from optlight.scene.camera import Camera
+from optlight.spec import LightSpec
+from optlight.viz.server import MeshcatServer
+
+Array = NDArray[np.float64]
+
+ROBOT_NODE = "robot"
+OBJECT_NODE = "object"
+SPHERE_NODE = "light_sphere"
+LANDMARKS_NODE = "landmarks"
+PATH_NODE = "path"
+CAMERA_NODE = "camera"
+LIGHT_NODE = "light"
+
+#: Robots drawn with their collision meshes: meshcat renders their COLLADA visual meshes broken.
+_COLLISION_MESH_ROBOTS = re.compile(r"^ur\d+")
+_COLLISION_MESH_COLOR = (0.62, 0.66, 0.72, 1.0)
+_LIGHT_COLOR = 0xFFC800
+
+
+class SceneLike(Protocol):
+    """What the preview reads from :class:`optlight.scene.Scene`."""
+
+    camera: Camera
+    sphere: LightSphere
+    mesh: trimesh.Trimesh
+    albedo: Array
+    light: LightSpec
+
+
+class RobotLike(Protocol):
+    """What the preview reads from :class:`optlight.robot.Robot`."""
+
+    name: str
+    model: pin.Model
+    light_frame_id: int
+    theta_ref: Array
+    base_placement: pin.SE3
+
+    def to_pin(self, theta: ArrayLike) -> Array: ...
+
+    def geometry_model(self, kind: Any = "collision") -> pin.GeometryModel: ...
+
+
+class TrajectoryLike(Protocol):
+    """What the preview reads from a timed trajectory (:class:`optlight.planning.timing.Trajectory`)."""
+
+    @property
+    def duration(self) -> float: ...
+
+    def sample(self, t: ArrayLike) -> tuple[Array, Array, Array]: ...
+
+
+class Preview:
+    """The meshcat scene of a plan (see the module docstring); built in the constructor.
+
+    Arguments: the problem's ``scene`` and ``robot``; ``landmarks_positions`` (M, 3) in m with their
+    ``landmark_costs`` (M,); ``path_positions`` (K, 3), the light's planned path in m; an optional
+    timed ``trajectory`` (joint angles θ). Keywords: ``theta``, the joint angles shown without a
+    trajectory (default: the trajectory's start, else the robot's reference configuration);
+    ``light_position`` (m), where the light is for the object's shading (default: the light frame's
+    origin in the configuration shown); ``show_robot`` False leaves the robot's meshes out (the
+    light is still placed by its kinematics); ``fps``, the animation's frame rate.
+    """
+
+    def __init__(
+        self,
+        scene: SceneLike,
+        robot: RobotLike,
+        landmarks_positions: ArrayLike,
+        landmark_costs: ArrayLike,
+        path_positions: ArrayLike,
+        trajectory: TrajectoryLike | None = None,
+        *,
+        theta: ArrayLike | None = None,
+        light_position: ArrayLike | None = None,
+        show_robot: bool = True,
+        fps: float = 30.0,
+    ) -> None:
+        landmarks = np.asarray(landmarks_positions, float).reshape(-1, 3)
+        costs = np.asarray(landmark_costs, float).reshape(-1)
+        if costs.shape != (len(landmarks),):
+            raise ValueError(f"{len(landmarks)} landmarks but {costs.size} landmark costs")
+        if fps <= 0:
+            raise ValueError(f"fps must be positive, got {fps}")
+        self.scene = scene
+        self.robot = robot
+        self.trajectory = trajectory
+        self.fps = float(fps)
+        if trajectory is not None:
+            theta0 = trajectory.sample(0.0)[0][0]
+        elif theta is not None:
+            theta0 = np.asarray(theta, float)
+        else:
+            theta0 = np.asarray(robot.theta_ref, float)
+        self.theta = theta0
+        self._data = robot.model.createData()
+        self.light_pose = self._light_placement(theta0)
+        joint_positions = np.array([placement.translation for placement in self._data.oMi])
+        self.light_position = (
+            self.light_pose.translation.copy()
+            if light_position is None
+            else np.asarray(light_position, float)
+        )
+        #: Times (s) of the animation's frames; empty without a trajectory.
+        self.frame_times = (
+            animation_times(trajectory.duration, self.fps) if trajectory is not None else np.zeros(0)
+        )
+
+        self._recorder = _SceneRecorder()
+        vis = meshcat.Visualizer(window=self._recorder)
+        robot_view = self._add_robot(vis) if show_robot else None
+        self._add_object(vis)
+        self._add_sphere(vis)
+        self._add_landmarks(vis, landmarks, costs)
+        self._add_path(vis, np.asarray(path_positions, float).reshape(-1, 3))
+        self._add_camera(vis)
+        self._add_light(vis)
+        self._set_view(vis, np.vstack([joint_positions, landmarks]))
+        if trajectory is not None:
+            self._add_animation(vis, robot_view)
+
+    # ------------------------------------------------------------------ outputs
+    def static_html(self) -> str:
+        """A standalone HTML page of the scene: meshcat's viewer, the meshes and the animation
+        inlined; opens from disk without a server or network."""
+        viewer_js = (Path(VIEWER_ROOT) / "main.min.js").read_text(encoding="utf-8")
+        commands = [base64.b64encode(packed).decode("ascii") for _, _, packed in self._recorder.commands()]
+        return _HTML_TEMPLATE.format(
+            title=f"optlight preview: {self.robot.name}",
+            viewer_js=viewer_js,
+            commands=json.dumps(commands),
+        )
+
+    def save_html(self, path: str | Path) -> Path:
+        """Write :meth:`static_html` to ``path`` (folders created); returns the path."""
+        out = Path(path)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(self.static_html(), encoding="utf-8")
+        return out
+
+    @contextmanager
+    def serve(self) -> Iterator[str]:
+        """Serve the scene live: start a meshcat server on 127.0.0.1, send it the scene and yield
+        the viewer's URL; the server ends when the block exits (normally, by an exception or by
+        Ctrl-C). Prints nothing."""
+        with MeshcatServer() as server:
+            server.send(self._recorder.commands())
+            yield server.web_url
+
+    # ------------------------------------------------------------------ scene content
+    def _light_placement(self, theta: ArrayLike) -> pin.SE3:
+        model = self.robot.model
+        pin.forwardKinematics(model, self._data, self.robot.to_pin(theta))
+        return pin.updateFramePlacement(model, self._data, self.robot.light_frame_id).copy()
+
+    def _add_robot(self, vis: meshcat.Visualizer) -> _RobotView:
+        robot = self.robot
+        if _COLLISION_MESH_ROBOTS.match(robot.name):
+            geometry, color = robot.geometry_model("collision"), _COLLISION_MESH_COLOR
+        else:
+            geometry, color = robot.geometry_model("visual"), None
+        view = _RobotView(robot.model, None, geometry)
+        view.initViewer(viewer=vis)
+        view.loadViewerModel(rootNodeName=ROBOT_NODE, visual_color=color)
+        view.display(robot.to_pin(self.theta))
+        return view
+
+    def _add_object(self, vis: meshcat.Visualizer) -> None:
+        scene = self.scene
+        gray = vertex_shading(scene.mesh, scene.albedo, self.light_position, scene.light, scene.sphere)
+        colors = np.repeat(gray[:, None], 3, axis=1)
+        geometry = mg.TriangularMeshGeometry(scene.mesh.vertices, scene.mesh.faces, color=colors)
+        vis[OBJECT_NODE].set_object(geometry, mg.MeshBasicMaterial(vertexColors=True))
+
+    def _add_sphere(self, vis: meshcat.Visualizer) -> None:
+        sphere = self.scene.sphere
+        material = mg.MeshLambertMaterial(color=0x6FA8DC, opacity=0.12, transparent=True, depthWrite=False)
+        vis[SPHERE_NODE].set_object(mg.Sphere(sphere.radius), material)
+        vis[SPHERE_NODE].set_transform(_translation(sphere.center))
+
+    def _add_landmarks(self, vis: meshcat.Visualizer, positions: Array, costs: Array) -> None:
+        radius = 0.03 * self.scene.sphere.radius
+        span = float(np.ptp(costs)) if costs.size else 0.0
+        levels = (costs - costs.min()) / span if span > 0 else np.full(costs.shape, 0.5)
+        colormap = matplotlib.colormaps["viridis"]
+        for i, (position, level) in enumerate(zip(positions, levels, strict=True)):
+            node = vis[f"{LANDMARKS_NODE}/{i:03d}"]
+            node.set_object(mg.Sphere(radius), mg.MeshLambertMaterial(color=_rgb_int(colormap(level))))
+            node.set_transform(_translation(position))
+
+    def _add_path(self, vis: meshcat.Visualizer, positions: Array) -> None:
+        if len(positions) < 2:
+            return
+        line = mg.Line(
+            mg.PointsGeometry(positions.T.astype(np.float32)), mg.LineBasicMaterial(color=0xE8590C)
+        )
+        vis[PATH_NODE].set_object(line)
+
+    def _add_camera(self, vis: meshcat.Visualizer) -> None:
+        camera = self.scene.camera
+        depth = float((self.scene.sphere.center - camera.position) @ camera.rotation[:, 2])
+        corners = camera_corners(camera, depth)
+        segments = np.concatenate(
+            [np.repeat(camera.position[None], 4, 0), corners, corners, np.roll(corners, -1, axis=0)], axis=1
+        ).reshape(-1, 3)
+        frustum = mg.LineSegments(
+            mg.PointsGeometry(segments.T.astype(np.float32)), mg.LineBasicMaterial(color=0x222222)
+        )
+        vis[f"{CAMERA_NODE}/frustum"].set_object(frustum)
+        body = vis[f"{CAMERA_NODE}/body"]
+        size = 0.08 * self.scene.sphere.radius
+        body.set_object(mg.Box([1.4 * size, size, 1.8 * size]), mg.MeshLambertMaterial(color=0x333333))
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = camera.rotation, camera.position - 0.9 * size * camera.rotation[:, 2]
+        body.set_transform(pose)
+
+    def _add_light(self, vis: meshcat.Visualizer) -> None:
+        size = 0.05 * self.scene.sphere.radius
+        vis[f"{LIGHT_NODE}/bulb"].set_object(mg.Sphere(0.5 * size), mg.MeshBasicMaterial(color=_LIGHT_COLOR))
+        length = 4.0 * size
+        # three.js cylinders run along +y: the wide end at +y, turned onto +z, apex at the light.
+        beam = mg.Cylinder(length, radiusTop=1.2 * size, radiusBottom=0.0)
+        vis[f"{LIGHT_NODE}/beam"].set_object(
+            beam, mg.MeshBasicMaterial(color=_LIGHT_COLOR, opacity=0.45, transparent=True, depthWrite=False)
+        )
+        turn = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0.5 * length], [0, 0, 0, 1]])
+        vis[f"{LIGHT_NODE}/beam"].set_transform(turn)
+        vis[LIGHT_NODE].set_transform(self.light_pose.homogeneous)
+
+    def _set_view(self, vis: meshcat.Visualizer, points: Array) -> None:
+        """Frame the scene in meshcat's orbiting camera, seen from the camera's side and above.
+
+        meshcat 0.3.2's camera always looks at (and orbits) the viewer's origin, and has no command
+        to move that target; so the scene, grid and axes are shifted by −c instead, c the centre of
+        ``points`` (the robot's joints in the pose shown and the landmarks), the object and the
+        camera, and the camera is placed relative to it.
+        """
+        sphere, camera = self.scene.sphere, self.scene.camera
+        points = np.vstack([points, sphere.center, camera.position])
+        center = 0.5 * (points.min(axis=0) + points.max(axis=0))
+        extent = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+        for node in ("/meshcat", "/Grid", "/Axes"):
+            vis[node].set_transform(_translation(-center))
+        toward_camera = camera.position - sphere.center
+        toward_camera[2] = 0.0
+        horizontal = float(np.linalg.norm(toward_camera))
+        toward_camera = toward_camera / horizontal if horizontal > 1e-9 else np.array([1.0, 0.0, 0.0])
+        side = np.cross([0.0, 0.0, 1.0], toward_camera)
+        direction = toward_camera + 0.8 * side + np.array([0.0, 0.0, 0.6])
+        offset = 0.7 * max(extent, 0.5) * direction / np.linalg.norm(direction)
+        # The camera node is y-up (three.js): world (x, y, z) is (x, z, −y) there.
+        vis["/Cameras/default/rotated/<object>"].set_property("position", [offset[0], offset[2], -offset[1]])
+
+    def _add_animation(self, vis: meshcat.Visualizer, robot_view: _RobotView | None) -> None:
+        assert self.trajectory is not None
+        thetas = self.trajectory.sample(self.frame_times)[0]
+        model = self.robot.model
+        animation = Animation(default_framerate=self.fps)
+        for t, theta in zip(self.frame_times, thetas, strict=True):
+            frame = animation.at_frame(vis, float(t * self.fps))
+            pin.forwardKinematics(model, self._data, self.robot.to_pin(theta))
+            light = pin.updateFramePlacement(model, self._data, self.robot.light_frame_id)
+            frame[LIGHT_NODE].set_transform(light.homogeneous)
+            if robot_view is not None:
+                for node, placement in robot_view.placements(self._data):
+                    frame[node].set_transform(placement.homogeneous)
+        vis.set_animation(animation, play=True, repetitions=1)
+
+
+class _RobotView(MeshcatVisualizer):
+    """pinocchio's ``MeshcatVisualizer``, reading STL meshes through trimesh: meshcat's STL loader
+    uses the file's facet normals, which some files (the UR collision meshes) leave at zero, and
+    such a mesh renders black. Sent as an indexed mesh, the viewer computes its normals."""
+
+    def loadMeshFromFile(self, geometry_object: pin.GeometryObject) -> Any:
+        """The meshcat geometry of a mesh file: STL through trimesh, other formats as pinocchio does."""
+        if Path(geometry_object.meshPath).suffix.lower() == ".stl":
+            mesh = trimesh.load_mesh(geometry_object.meshPath)
+            return mg.TriangularMeshGeometry(mesh.vertices, mesh.faces)
+        return super().loadMeshFromFile(geometry_object)
+
+    def placements(self, data: pin.Data) -> list[tuple[str, pin.SE3]]:
+        """Viewer node and world placement of every mesh, for the joint placements in ``data``
+        (forward kinematics already done on the model)."""
+        pin.updateGeometryPlacements(self.model, data, self.visual_model, self.visual_data)
+        return [
+            (self.getViewerNodeName(obj, pin.GeometryType.VISUAL), self.visual_data.oMg[k])
+            for k, obj in enumerate(self.visual_model.geometryObjects)
+        ]
+
+
+def animation_times(duration: float, fps: float) -> Array:
+    """Frame times 0, 1/fps, 2/fps, … (s), with a last frame at ``duration`` when it falls between."""
+    times = np.arange(int(np.floor(duration * fps + 1e-9)) + 1) / fps
+    if duration - times[-1] > 1e-9:
+        times = np.append(times, duration)
+    return times
+
+
+def vertex_shading(
+    mesh: trimesh.Trimesh, albedo: ArrayLike, light_position: ArrayLike, light: LightSpec, sphere: LightSphere
+) -> Array:
+    """Luminance per vertex (V,) in [0, 1] (1 = saturation) for a light at ``light_position`` (m):
+    DESIGN §4's model, I = clip(g·ρ(E·max(0, n·l)·f + k_amb)) / s, with the vertex normals, directional
+    or point light as ``light.model`` says, and no cast shadows."""
+    a = np.asarray(light_position, float)
+    normals = np.asarray(mesh.vertex_normals, float)
+    if light.model == "directional":
+        cos = normals @ ((a - sphere.center) / sphere.radius)
+        falloff = np.ones_like(cos)
+    else:
+        to_light = a - np.asarray(mesh.vertices, float)
+        r2 = np.einsum("ij,ij->i", to_light, to_light)
+        cos = np.einsum("ij,ij->i", normals, to_light) / np.sqrt(r2)
+        falloff = sphere.radius**2 / r2
+    rho = np.asarray(albedo, float)
+    value = light.gain * rho * (light.power * np.maximum(cos, 0.0) * falloff + light.ambient)
+    return np.clip(value, 0.0, light.saturation) / light.saturation
+
+
+def camera_corners(camera: Camera, depth: float) -> Array:
+    """World points (4, 3) on the rays through the image's outer corners, at ``depth`` (m) along the
+    optical axis; order: top-left, top-right, bottom-right, bottom-left."""
+    u = np.array([-0.5, camera.width - 0.5, camera.width - 0.5, -0.5])
+    v = np.array([-0.5, -0.5, camera.height - 0.5, camera.height - 0.5])
+    rays = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones(4)], axis=1)
+    return camera.position + depth * rays @ camera.rotation.T
+
+
+def _translation(position: ArrayLike) -> Array:
+    matrix = np.eye(4)
+    matrix[:3, 3] = np.asarray(position, float)
+    return matrix
+
+
+def _rgb_int(rgba: Any) -> int:
+    r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
+    return (r << 16) | (g << 8) | b
+
+
+class _SceneRecorder:
+    """Stands in for meshcat's ``ViewerWindow``: keeps the commands sent to it in the scene tree
+    meshcat's server keeps (last transform wins, ``set_object`` clears a node's properties), and
+    gives them back in an order a viewer can replay (the animation last, after its targets)."""
+
+    def __init__(self) -> None:
+        self.tree = SceneTree()
+        self.animation: bytes | None = None
+
+    def send(self, command: Any) -> None:
+        """Record one meshcat command (``SetObject``, ``SetTransform``, ``SetProperty``,
+        ``SetAnimation`` or pinocchio's ``DaeMeshGeometry``)."""
+        data = command.lower()
+        packed = umsgpack.packb(data)
+        kind = data["type"]
+        node = find_node(self.tree, [p for p in data["path"].split("/") if p])
+        if kind == "set_object":
+            node.object = packed
+            node.properties = []
+        elif kind == "set_transform":
+            node.transform = packed
+        elif kind == "set_property":
+            node.properties.append(packed)
+        elif kind == "set_animation":
+            self.animation = packed
+        else:
+            raise ValueError(f"the preview does not record meshcat {kind!r} commands")
+
+    def commands(self) -> list[tuple[str, str, bytes]]:
+        """(type, path, packed command) for every recorded command, parents before children."""
+        out: list[tuple[str, str, bytes]] = []
+        stack: list[tuple[str, Any]] = [("", self.tree)]
+        while stack:
+            path, node = stack.pop()
+            if node.object is not None:
+                out.append(("set_object", path, node.object))
+            out.extend(("set_property", path, p) for p in node.properties)
+            if node.transform is not None:
+                out.append(("set_transform", path, node.transform))
+            stack.extend((f"{path}/{name}", child) for name, child in reversed(list(node.items())))
+        if self.animation is not None:
+            out.append(("set_animation", "", self.animation))
+        return out
+
+
+_HTML_TEMPLATE = """<!DOCTYPE html>
+<html>
+<head>
+<meta charset="utf-8">
+<title>{title}</title>
+<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}</style>
+</head>
+<body>
+<div id="meshcat-pane"></div>
+<script>{viewer_js}</script>
+<script type="application/json" id="optlight-scene">{commands}</script>
+<script>
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+for (const command of JSON.parse(document.getElementById("optlight-scene").textContent)) {{
+  const bytes = atob(command);
+  const buffer = new Uint8Array(bytes.length);
+  for (let i = 0; i < bytes.length; i++) buffer[i] = bytes.charCodeAt(i);
+  viewer.handle_command_bytearray(buffer);
+}}
+</script>
+</body>
+</html>
+"""
