@@ -32,6 +32,7 @@ or scrubbed in the viewer's "Animations" panel.
 from __future__ import annotations
 
 import base64
+import html
 import json
 import re
 from collections.abc import Iterator
@@ -182,7 +183,7 @@ class Preview:
         viewer_js = (Path(VIEWER_ROOT) / "main.min.js").read_text(encoding="utf-8")
         commands = [base64.b64encode(packed).decode("ascii") for _, _, packed in self._recorder.commands()]
         return _HTML_TEMPLATE.format(
-            title=f"optlight preview: {self.robot.name}",
+            title=html.escape(f"optlight preview: {self.robot.name}"),
             viewer_js=viewer_js,
             commands=json.dumps(commands),
         )
