@@ -1,0 +1,473 @@
+"""Independent verification of a timed plan before anything is exported (DESIGN §6).
+
+The checks use only the trajectory's own samples and the caller's forward kinematics, never the
+planner's or TOPPRA's internal data. The trajectory is resampled at ``rate_hz`` (≥ 1 kHz) plus every
+dwell/motion boundary (and just before each), every capture time, and then:
+
+- ``position``: lower_j − tol ≤ q_j ≤ upper_j + tol (rad);
+- ``velocity``: |q̇_j| ≤ v_max,j (1 + limit_rel);
+- ``acceleration``: |q̈_j| ≤ a_max,j (1 + limit_rel);
+- at every sample of every dwell (capture time included), with (a, R) = light_pose(q):
+  ``h``: |h| = |Rᵀ(O − a) − [0, 0, b]| ≤ h_m (on the sphere and aimed at O, DESIGN §3);
+  ``aim``: angle between the light axis R e_z and O − a ≤ aim_rad;
+  ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
+- ``path`` (when a planned path is given): distance from every sampled light position to the
+  polyline of planned light positions ≤ path_m.
+
+A NaN anywhere (a broken trajectory or forward kinematics) fails the check it enters. A violation is
+recorded per *episode* (a run of consecutive failing samples of one joint or one
+quantity) at its worst sample; the report keeps the first :data:`MAX_EPISODES` per check, the count of
+failing samples, and the worst value of every check.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.errors import VerificationError
+from optlight.geometry import LightSphere, h_residual
+from optlight.planning.timing import Trajectory
+
+Array = NDArray[np.float64]
+LightPose = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+#: Episodes kept per check in :attr:`VerificationReport.violations`.
+MAX_EPISODES = 5
+#: Points per chunk in the point-to-polyline distance (bounds memory: chunk × segments × 3 floats).
+_CHUNK = 256
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """What counts as a violation. Units: relative (limit_rel), rad, m."""
+
+    limit_rel: float = 1e-3
+    position_rad: float = 1e-6
+    h_m: float = 1e-6
+    aim_rad: float = 1e-4
+    landmark_m: float = 1e-6
+    path_m: float = 5e-3
+
+
+@dataclass(frozen=True)
+class Violation:
+    """The worst sample of one episode. ``value`` and ``limit`` are physical: the joint position and
+    the bound it crossed (rad), |q̇| and v_max(1 + limit_rel) (rad/s), |q̈| and its limit (rad/s²),
+    |h|, the landmark or path distance (m), the aiming angle (rad)."""
+
+    check: str
+    time_s: float
+    joint: str | None
+    value: float
+    limit: float
+    message: str
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """Worst value of one check over all its samples, in the check's measure: the largest excess
+    over the position limits (rad; negative = smallest margin), the largest |q̇_j|/v_max,j or
+    |q̈_j|/a_max,j (ratio), the largest |h|, landmark or path distance (m), aiming angle (rad)."""
+
+    name: str
+    measure: str
+    unit: str
+    max_value: float
+    limit: float
+    time_s: float | None
+    joint: str | None
+    failing_samples: int
+    episodes: int
+    samples: int
+
+    @property
+    def passed(self) -> bool:
+        """No failing sample."""
+        return self.failing_samples == 0
+
+
+@dataclass(frozen=True)
+class VerificationReport:
+    """Outcome of :func:`verify_trajectory`."""
+
+    checks: dict[str, CheckResult]
+    violations: tuple[Violation, ...]
+    duration_s: float
+    samples: int
+    rate_hz: float
+    tolerances: Tolerances
+    skipped: tuple[str, ...] = ()
+    elapsed_s: float = 0.0
+
+    @property
+    def passed(self) -> bool:
+        """Every check passed."""
+        return all(c.passed for c in self.checks.values())
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Number of failing samples per check."""
+        return {k: c.failing_samples for k, c in self.checks.items()}
+
+    @property
+    def maxima(self) -> dict[str, float]:
+        """Worst value per check, in the check's measure (see :class:`CheckResult`)."""
+        return {k: c.max_value for k, c in self.checks.items()}
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-safe data (non-finite numbers become None)."""
+        return {
+            "passed": self.passed,
+            "duration_s": self.duration_s,
+            "samples": self.samples,
+            "rate_hz": self.rate_hz,
+            "elapsed_s": self.elapsed_s,
+            "tolerances": asdict(self.tolerances),
+            "skipped": list(self.skipped),
+            "counts": self.counts,
+            "checks": {k: {**_finite_or_none(asdict(c)), "passed": c.passed} for k, c in self.checks.items()},
+            "violations": [_finite_or_none(asdict(v)) for v in self.violations],
+        }
+
+    def summary(self) -> str:
+        """A readable multi-line account: verdict, one line per check, the recorded violations."""
+        verdict = "PASSED" if self.passed else "FAILED"
+        lines = [
+            f"Verification {verdict}: {self.duration_s:.3f} s trajectory, {self.samples} samples "
+            f"(≥ {self.rate_hz:g} Hz), checked in {self.elapsed_s:.2f} s",
+        ]
+        width = max(len(k) for k in self.checks) if self.checks else 8
+        for name, c in self.checks.items():
+            where = ""
+            if c.time_s is not None:
+                where = f" at t = {c.time_s:.4f} s" + (f" ({c.joint})" if c.joint else "")
+            unit = f" {c.unit}" if c.unit else ""
+            lines.append(
+                f"  {'ok  ' if c.passed else 'FAIL'} {name:<{width}}  {c.measure} = {c.max_value:.6g}{unit}{where}; "
+                f"limit {c.limit:.6g}{unit}; {c.failing_samples}/{c.samples} samples over in {c.episodes} episodes"
+            )
+        for name in self.skipped:
+            lines.append(f"  skip {name:<{width}}  not checked")
+        if self.violations:
+            lines.append(f"Violations (first {MAX_EPISODES} episodes per check):")
+            lines.extend(f"  {v.check}: {v.message}" for v in self.violations)
+        return "\n".join(lines)
+
+
+def ensure_verified(report: VerificationReport) -> None:
+    """Raise :class:`VerificationError` (carrying the report) unless the report passed."""
+    if not report.passed:
+        raise VerificationError(report.summary(), report)
+
+
+def verify_trajectory(
+    trajectory: Trajectory,
+    *,
+    light_pose: LightPose,
+    lower: ArrayLike,
+    upper: ArrayLike,
+    velocity_limit: ArrayLike,
+    acceleration_limit: ArrayLike,
+    sphere: LightSphere,
+    landmark_positions: ArrayLike,
+    planned_path: ArrayLike | None = None,
+    rate_hz: float = 1000.0,
+    tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
+) -> VerificationReport:
+    """Check a timed trajectory against the joint limits and the light constraints (module docstring).
+
+    Args:
+        trajectory: the plan; its dwells (``landmark_intervals``) are matched with the landmarks.
+        light_pose: q (n,) -> (position a (3,) in m, rotation R (3, 3)) of the light frame in the
+            world frame; the light emits along R e_z.
+        lower, upper: (n,) joint position limits (rad; ±inf for none).
+        velocity_limit, acceleration_limit: (n,) positive limits (rad/s, rad/s²).
+        sphere: the light sphere (centre O, radius b).
+        landmark_positions: (M, 3) light positions (m, world) of the landmarks, in visiting order.
+        planned_path: (K, 3) light positions (m, world) along the planned path, or None to skip the
+            path check.
+        rate_hz: resampling rate, at least 1000 Hz.
+        tol: the tolerances.
+    """
+    start = time.perf_counter()
+    n = trajectory.dof
+    lo, hi = _per_joint(lower, n, "lower"), _per_joint(upper, n, "upper")
+    vmax, amax = (
+        _per_joint(velocity_limit, n, "velocity_limit"),
+        _per_joint(acceleration_limit, n, "acceleration_limit"),
+    )
+    if not ((vmax > 0).all() and (amax > 0).all()):
+        raise ValueError("velocity and acceleration limits must be positive")
+    landmarks = np.asarray(landmark_positions, float).reshape(-1, 3)
+    intervals = trajectory.landmark_intervals
+    if landmarks.shape[0] != intervals.shape[0]:
+        raise ValueError(
+            f"{landmarks.shape[0]} landmark positions for a trajectory with {intervals.shape[0]} dwells"
+        )
+    if rate_hz < 1000.0:
+        raise ValueError(f"rate_hz must be at least 1000 Hz, got {rate_hz}")
+
+    t = _verification_times(trajectory, rate_hz)
+    q, qd, qdd = trajectory.sample(t)
+    names = list(trajectory.joint_names) if trajectory.joint_names else [f"j{i}" for i in range(n)]
+    collector = _Collector(t, names)
+
+    excess = np.maximum(lo - q, q - hi)
+    collector.joint_check(
+        "position",
+        "largest excess over [lower, upper] (negative: margin)",
+        "rad",
+        excess,
+        np.full(n, tol.position_rad),
+        lambda j, k: (
+            f"joint {names[j]}: q = {q[k, j]:.6g} rad beyond [{lo[j]:.6g}, {hi[j]:.6g}] at t = {t[k]:.4f} s"
+        ),
+        value=lambda j, k: q[k, j],
+        limit=lambda j, k: hi[j] if q[k, j] > hi[j] else lo[j],
+    )
+
+    def rate_check(name: str, symbol: str, x: Array, lim: Array, unit: str) -> None:
+        bound = lim * (1 + tol.limit_rel)
+        collector.joint_check(
+            name,
+            f"largest |{symbol}_j| / limit_j",
+            "",
+            np.abs(x) / lim,
+            np.full(n, 1.0 + tol.limit_rel),
+            lambda j, k: (
+                f"joint {names[j]}: |{symbol}| = {abs(x[k, j]):.6g} {unit} > {bound[j]:.6g} {unit} "
+                f"at t = {t[k]:.4f} s"
+            ),
+            value=lambda j, k: abs(x[k, j]),
+            limit=lambda j, k: bound[j],
+        )
+
+    rate_check("velocity", "q̇", qd, vmax, "rad/s")
+    rate_check("acceleration", "q̈", qdd, amax, "rad/s²")
+
+    # Light at the landmarks, throughout each dwell.
+    dwell_of = np.full(t.size, -1)
+    for i, (a, b) in enumerate(intervals):
+        dwell_of[(t >= a - 1e-12) & (t <= b + 1e-12)] = i
+    in_dwell = np.flatnonzero(dwell_of >= 0)
+    path_needed = planned_path is not None
+    pose_at = np.arange(t.size) if path_needed else in_dwell
+    positions = np.full((t.size, 3), np.nan)
+    h_norm = np.full(t.size, np.nan)
+    aim = np.full(t.size, np.nan)
+    for k in pose_at:
+        a, r = light_pose(q[k])
+        a, r = np.asarray(a, float), np.asarray(r, float)
+        positions[k] = a
+        if dwell_of[k] >= 0:
+            h_norm[k] = np.linalg.norm(h_residual(a, r, sphere.center, sphere.radius))
+            to_center = sphere.center - a
+            axis = r[:, 2]
+            aim[k] = math.atan2(np.linalg.norm(np.cross(axis, to_center)), float(axis @ to_center))
+    landmark_dist = np.linalg.norm(positions[in_dwell] - landmarks[dwell_of[in_dwell]], axis=1)
+
+    def dwell_check(name: str, values: Array, limit: float, unit: str, what: str) -> None:
+        collector.scalar_check(
+            name,
+            f"largest {what} during the dwells",
+            unit,
+            values,
+            limit,
+            in_dwell,
+            lambda k, v: (
+                f"landmark {dwell_of[k]}: {what} = {v:.3g} {unit} > {limit:.3g} {unit} at t = {t[k]:.4f} s"
+            ),
+        )
+
+    dwell_check("h", h_norm[in_dwell], tol.h_m, "m", "|h|")
+    dwell_check("aim", aim[in_dwell], tol.aim_rad, "rad", "aiming angle")
+    dwell_check("landmark", landmark_dist, tol.landmark_m, "m", "distance to the landmark")
+
+    skipped: tuple[str, ...] = ()
+    if planned_path is not None:
+        polyline = np.asarray(planned_path, float).reshape(-1, 3)
+        if polyline.shape[0] == 0:
+            raise ValueError("planned_path has no points")
+        deviation = distance_to_polyline(positions, polyline)
+        collector.scalar_check(
+            "path",
+            "largest distance to the planned path",
+            "m",
+            deviation,
+            tol.path_m,
+            np.arange(t.size),
+            lambda k, v: (
+                f"light {v * 1e3:.3g} mm from the planned path at t = {t[k]:.4f} s (> {tol.path_m * 1e3:.3g} mm)"
+            ),
+        )
+    else:
+        skipped = ("path",)
+
+    return VerificationReport(
+        checks=collector.checks,
+        violations=tuple(collector.violations),
+        duration_s=trajectory.duration,
+        samples=int(t.size),
+        rate_hz=float(rate_hz),
+        tolerances=tol,
+        skipped=skipped,
+        elapsed_s=time.perf_counter() - start,
+    )
+
+
+def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
+    """Euclidean distance (m) from each of the points (P, 3) to the polyline through (K, 3) vertices
+    (a single vertex is a point): min over segments [v_i, v_{i+1}] of |p − (v_i + c (v_{i+1} − v_i))|,
+    c = clip((p − v_i)·d_i / |d_i|², 0, 1)."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    v = np.asarray(polyline, float).reshape(-1, 3)
+    a = v[:-1] if len(v) > 1 else v
+    d = np.diff(v, axis=0) if len(v) > 1 else np.zeros((1, 3))
+    dd = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
+    out = np.empty(len(p))
+    for s in range(0, len(p), _CHUNK):
+        rel = p[s : s + _CHUNK, None, :] - a[None]  # (C, S, 3)
+        c = np.clip(np.einsum("csk,sk->cs", rel, d) / dd, 0.0, 1.0)
+        out[s : s + _CHUNK] = np.linalg.norm(rel - c[..., None] * d[None], axis=2).min(axis=1)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def _verification_times(trajectory: Trajectory, rate_hz: float) -> Array:
+    """Uniform samples and boundaries (from :meth:`Trajectory.sample_times`), the instants just
+    before each boundary (q̈ jumps there), and the capture times."""
+    base = trajectory.sample_times(rate_hz)
+    before = trajectory.boundaries - 1e-7
+    extra = np.concatenate([before[before > 0], trajectory.capture_times])
+    return np.unique(np.concatenate([base, extra]))
+
+
+def _per_joint(value: ArrayLike, n: int, name: str) -> Array:
+    x = np.asarray(value, float)
+    if x.shape not in ((), (n,)) or np.isnan(x).any():
+        raise ValueError(f"{name} must be one or {n} numbers, got {x}")
+    return np.broadcast_to(x, (n,)).copy()
+
+
+def _runs(bad: NDArray[np.bool_], index: NDArray[np.intp] | None = None) -> list[tuple[int, int]]:
+    """(start, stop) ranges of the runs of True in a 1-D boolean array; with ``index`` (the sample
+    numbers of the entries) a run also ends where the sample numbers are not consecutive."""
+    link = bad[:-1] & bad[1:]
+    if index is not None:
+        link &= np.diff(index) == 1
+    starts = np.flatnonzero(bad & ~np.concatenate([[False], link]))
+    stops = np.flatnonzero(bad & ~np.concatenate([link, [False]])) + 1
+    return list(zip(starts.tolist(), stops.tolist(), strict=True))
+
+
+def _finite_or_none(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
+
+
+class _Collector:
+    """Accumulates the check results and the first episodes of each check. A NaN measure fails."""
+
+    def __init__(self, t: Array, names: list[str]) -> None:
+        self.t = t
+        self.names = names
+        self.checks: dict[str, CheckResult] = {}
+        self.violations: list[Violation] = []
+
+    def joint_check(
+        self,
+        name: str,
+        measure_name: str,
+        unit: str,
+        measure: Array,
+        threshold: Array,
+        message: Callable[[int, int], str],
+        value: Callable[[int, int], float] | None = None,
+        limit: Callable[[int, int], float] | None = None,
+    ) -> None:
+        """A check of every joint at every sample: fails where measure[k, j] > threshold[j].
+        ``message``, ``value`` and ``limit`` take (joint j, sample k)."""
+        bad = ~(measure <= threshold)
+        episodes = []
+        for j in range(measure.shape[1]):
+            for a, b in _runs(bad[:, j]):
+                episodes.append((a, a + _worst(measure[a:b, j]), j))
+        episodes.sort()
+        for _, k, j in episodes[:MAX_EPISODES]:
+            self.violations.append(
+                Violation(
+                    check=name,
+                    time_s=float(self.t[k]),
+                    joint=self.names[j],
+                    value=float(value(j, k) if value else measure[k, j]),
+                    limit=float(limit(j, k) if limit else threshold[j]),
+                    message=message(j, k),
+                )
+            )
+        if measure.size:
+            k, j = (int(i) for i in np.unravel_index(_worst(measure.ravel()), measure.shape))
+            worst, time_s, joint = float(measure[k, j]), float(self.t[k]), self.names[j]
+        else:
+            worst, time_s, joint = math.nan, None, None
+        self.checks[name] = CheckResult(
+            name=name,
+            measure=measure_name,
+            unit=unit,
+            max_value=worst,
+            limit=float(np.max(threshold)) if threshold.size else math.nan,
+            time_s=time_s,
+            joint=joint,
+            failing_samples=int(bad.any(axis=1).sum()),
+            episodes=len(episodes),
+            samples=int(measure.shape[0]),
+        )
+
+    def scalar_check(
+        self,
+        name: str,
+        measure_name: str,
+        unit: str,
+        measure: Array,
+        threshold: float,
+        index: NDArray[np.intp],
+        message: Callable[[int, float], str],
+    ) -> None:
+        """A check of one quantity at the samples ``index``: fails where measure > threshold.
+        ``message`` takes (sample k, value)."""
+        bad = ~(measure <= threshold)
+        runs = _runs(bad, index)
+        for a, b in runs[:MAX_EPISODES]:
+            w = a + _worst(measure[a:b])
+            k = int(index[w])
+            self.violations.append(
+                Violation(
+                    name, float(self.t[k]), None, float(measure[w]), threshold, message(k, float(measure[w]))
+                )
+            )
+        w = _worst(measure) if measure.size else -1
+        self.checks[name] = CheckResult(
+            name=name,
+            measure=measure_name,
+            unit=unit,
+            max_value=float(measure[w]) if w >= 0 else math.nan,
+            limit=threshold,
+            time_s=float(self.t[index[w]]) if w >= 0 else None,
+            joint=None,
+            failing_samples=int(bad.sum()),
+            episodes=len(runs),
+            samples=int(measure.size),
+        )
+
+
+def _worst(x: Array) -> int:
+    """Index of the first NaN of a 1-D array, else of its maximum."""
+    nan = np.flatnonzero(np.isnan(x))
+    return int(nan[0]) if nan.size else int(np.argmax(x))
