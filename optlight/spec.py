@@ -181,10 +181,10 @@ class TermSpec:
     )
     weight: float = key(1.0, "weight of the term in the sum", lo=0.0)
     distance: Literal["l2", "chi2", "emd", "emd2"] = key("emd2", "histogram distance (kind = histogram)")
-    target: float | None = key(None, "target mean or standard deviation (kind = mean | contrast)", lo=0.0)
+    target: float | None = key(None, "target mean or standard deviation (kind = mean or contrast)", lo=0.0)
     level: float | None = key(
         None,
-        "normalised luminance where a pixel counts as saturated or shadowed (default 0.98 | 0.05)",
+        "normalised luminance where a pixel counts as saturated or shadowed (default 0.98, 0.05)",
         lo=0.0,
         hi=1.0,
     )
@@ -243,6 +243,13 @@ class LandmarksSpec:
         lo_open=True,
     )
     seeds: int = key(3, "sweep minima refined by IPOPT per azimuth", lo=1, hi=50)
+    resolution: int = key(
+        96,
+        "longer image side of the search renders (the camera's when smaller); reported costs use the camera's",
+        unit="px",
+        lo=8,
+        hi=8192,
+    )
     allow_partial: bool = key(False, "drop unreachable landmarks with a warning instead of failing")
 
 
