@@ -1,0 +1,174 @@
+"""Figures (matplotlib, PNG, headless): small functions that take results and an output path and
+return the path written.
+
+Landmark figures: :func:`plot_landmarks_polar` (the paper's Fig. 1), :func:`plot_histograms`,
+:func:`plot_contact_sheet`, :func:`plot_cost_map`; :func:`save_landmark_figures` writes all four.
+Figures are drawn on :class:`matplotlib.figure.Figure` objects, never through pyplot, so nothing
+depends on a display or on global backend state. Angles are shown in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import cast
+
+import numpy as np
+from matplotlib.colors import LogNorm
+from matplotlib.figure import Figure
+from matplotlib.projections.polar import PolarAxes
+
+from optlight.planning.landmarks import LandmarkSet
+from optlight.scene import Scene
+
+#: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
+COST_FLOOR = 1e-12
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    return path
+
+
+def _polar_axes(fig: Figure, r_max: float) -> PolarAxes:
+    ax = cast(PolarAxes, fig.add_subplot(projection="polar"))
+    ax.set_rlim(0.0, math.degrees(r_max))
+    ax.set_rlabel_position(135)
+    ax.grid(True, alpha=0.4)
+    return ax
+
+
+def _zenith_edges(zenith: np.ndarray) -> np.ndarray:
+    """Cell edges (n + 1,) around sorted zeniths (n ≥ 2): midpoints, ends mirrored, clipped at 0."""
+    mid = 0.5 * (zenith[1:] + zenith[:-1])
+    return np.maximum(np.r_[2 * zenith[0] - mid[0], mid, 2 * zenith[-1] - mid[-1]], 0.0)
+
+
+def _azimuth_edges(azimuth: np.ndarray) -> np.ndarray:
+    """Cell edges (n + 1,) around n equally spaced azimuths covering the circle (2πj/n)."""
+    step = 2 * np.pi / azimuth.size
+    return np.r_[azimuth - step / 2, azimuth[-1] + step / 2]
+
+
+def radial_limit(landmarks: LandmarkSet, zenith_max: float, fixed_zenith: float | None = None) -> float:
+    """A radial limit (rad) for polar plots: 1.4 × the largest landmark (or fixed) zenith, rounded up
+    to 5°, at most ``zenith_max``."""
+    largest = max([float(landmarks.zeniths.max(initial=0.0))] + ([fixed_zenith] if fixed_zenith else []))
+    return min(zenith_max, math.radians(5 * math.ceil(max(math.degrees(1.4 * largest), 1e-9) / 5)))
+
+
+def plot_landmarks_polar(
+    landmarks: LandmarkSet, path: str | Path, r_max: float, fixed_zenith: float | None = None
+) -> Path:
+    """The landmarks projected on the plane (the paper's Fig. 1): radius = zenith (deg), angle =
+    azimuth; circles for the landmarks, stars for the fixed-zenith circle at the same azimuths
+    (``fixed_zenith``, rad; the paper's 10° trajectory). ``r_max`` (rad) is the radial limit."""
+    fig = Figure(figsize=(5.2, 5.2))
+    ax = _polar_axes(fig, r_max)
+    az, zen = landmarks.azimuths, np.degrees(landmarks.zeniths)
+    if fixed_zenith is not None:
+        circle = np.linspace(0, 2 * np.pi, 361)
+        ax.plot(circle, np.full_like(circle, math.degrees(fixed_zenith)), color="0.6", lw=0.8)
+        ax.plot(
+            az,
+            np.full_like(az, math.degrees(fixed_zenith)),
+            "*",
+            color="tab:orange",
+            ms=8,
+            label="fixed zenith",
+        )
+    order = np.argsort(az) if landmarks.mode == "azimuth" else np.arange(len(az))
+    if landmarks.mode == "azimuth":
+        ax.plot(np.r_[az[order], az[order][:1]], np.r_[zen[order], zen[order][:1]], color="tab:blue", lw=0.8)
+    ax.plot(az, zen, "o", mfc="none", color="tab:blue", ms=7, label="landmarks")
+    ax.set_title(f"Landmarks ({len(landmarks)}, {landmarks.mode} mode): radius = zenith (deg)", fontsize=10)
+    ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8, frameon=False)
+    return _save(fig, path)
+
+
+def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[int] | None = None) -> Path:
+    """Reference against achieved soft histograms at a few landmarks (default: four spread over the
+    set), bins on normalised luminance [0, 1]."""
+    n = len(landmarks)
+    if indices is None:
+        indices = sorted(set(np.linspace(0, n - 1, min(4, n)).round().astype(int).tolist()))
+    k = landmarks.reference_histogram.size
+    centres = (np.arange(k) + 0.5) / k
+    fig = Figure(figsize=(3.2 * len(indices), 2.8))
+    axes = fig.subplots(1, len(indices), sharey=True, squeeze=False)[0]
+    for ax, i in zip(axes, indices, strict=True):
+        lm = landmarks.landmarks[i]
+        ax.bar(centres, landmarks.histograms[i], width=1.0 / k, color="tab:blue", alpha=0.6, label="achieved")
+        ax.step(centres, landmarks.reference_histogram, where="mid", color="k", lw=1.2, label="reference")
+        ax.set_title(
+            f"#{lm.index}: θ {math.degrees(lm.zenith):.1f}°, φ {math.degrees(lm.azimuth):.0f}°\ncost {lm.cost:.2e}",
+            fontsize=9,
+        )
+        ax.set_xlabel("normalised luminance")
+        ax.set_xlim(0, 1)
+    axes[0].set_ylabel("fraction of pixels")
+    axes[0].legend(fontsize=8, frameon=False)
+    return _save(fig, path)
+
+
+def plot_contact_sheet(landmarks: LandmarkSet, scene: Scene, path: str | Path, columns: int = 6) -> Path:
+    """The camera image (NumPy renderer, shadow rays) at every landmark, in a grid, each labelled with
+    its index, zenith and azimuth."""
+    n = len(landmarks)
+    cols = max(1, min(columns, n))
+    rows = math.ceil(n / cols)
+    fig = Figure(figsize=(1.6 * cols, 1.75 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, lm in zip(axes.ravel(), landmarks.landmarks, strict=False):
+        ax.imshow(scene.render(lm.position), cmap="gray", vmin=0.0, vmax=scene.light.saturation)
+        ax.set_title(
+            f"#{lm.index} θ {math.degrees(lm.zenith):.1f}° φ {math.degrees(lm.azimuth):.0f}°", fontsize=7
+        )
+    fig.subplots_adjust(wspace=0.05, hspace=0.25)
+    return _save(fig, path)
+
+
+def plot_cost_map(landmarks: LandmarkSet, path: str | Path, r_max: float) -> Path:
+    """The coarse sweep's cost over (zenith, azimuth) as a polar heat map (radius = zenith in deg up
+    to ``r_max`` (rad), logarithmic colours over five decades below the largest cost), the landmarks
+    on top."""
+    grid = landmarks.sweep
+    fig = Figure(figsize=(5.8, 5.0))
+    ax = _polar_axes(fig, r_max)
+    shown = grid.cost[:, grid.zenith <= r_max + 1e-12]
+    vmax = float(shown.max())
+    cost = np.maximum(grid.cost, COST_FLOOR)
+    mesh = ax.pcolormesh(
+        _azimuth_edges(grid.azimuth),
+        np.degrees(_zenith_edges(grid.zenith)),
+        cost.T,
+        shading="flat",
+        norm=LogNorm(vmin=max(COST_FLOOR, vmax * 1e-5), vmax=vmax),
+        cmap="viridis_r",
+    )
+    ax.plot(landmarks.azimuths, np.degrees(landmarks.zeniths), "o", mfc="none", color="tab:red", ms=6)
+    width, height = landmarks.resolution
+    ax.set_title(f"Sweep cost (search renders {width}×{height}), landmarks in red", fontsize=10)
+    fig.colorbar(mesh, ax=ax, pad=0.1, shrink=0.8, label="cost")
+    return _save(fig, path)
+
+
+def save_landmark_figures(landmarks: LandmarkSet, scene: Scene, folder: str | Path) -> list[Path]:
+    """All landmark figures into ``folder``: landmarks_polar.png, landmarks_histograms.png,
+    landmarks_images.png, landmarks_cost.png. The fixed-zenith circle is the reference light's zenith
+    when the reference is a light; the polar plots zoom to :func:`radial_limit`."""
+    folder = Path(folder)
+    ref = scene.problem.objective.reference
+    fixed = math.radians(ref.zenith_deg) if ref.kind == "light" else None
+    r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed)
+    return [
+        plot_landmarks_polar(landmarks, folder / "landmarks_polar.png", r_max, fixed),
+        plot_histograms(landmarks, folder / "landmarks_histograms.png"),
+        plot_contact_sheet(landmarks, scene, folder / "landmarks_images.png"),
+        plot_cost_map(landmarks, folder / "landmarks_cost.png", r_max),
+    ]

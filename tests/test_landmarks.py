@@ -1,0 +1,150 @@
+"""Landmark search: the reference light is found again, mirror-symmetric object -> mirror-symmetric
+landmarks, never worse than the sweep, NLP built once, free mode keeps its separation, figures."""
+
+from __future__ import annotations
+
+import copy
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from optlight.errors import ProblemError
+from optlight.objectives import Objective
+from optlight.planning import landmarks as lm_module
+from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima, search_scene, zenith_grid
+from optlight.scene import Scene
+from optlight.spec import PROBLEMS_DIR, Problem, problem_from_dict
+from optlight.viz.figures import save_landmark_figures
+
+REF_ZENITH_DEG = 11.3  # off the sweep grid, so only the refinement can land on it
+
+
+def small_problem(**landmarks: Any) -> Problem:
+    """The default face at 64×64 px, searched at 40 px, reference light off the sweep grid."""
+    with (PROBLEMS_DIR / "default.toml").open("rb") as f:
+        data = copy.deepcopy(tomllib.load(f))
+    data["camera"].update(width=64, height=64)
+    data["object"]["face"] = {"resolution": 64}
+    data["objective"]["reference"].update(zenith_deg=REF_ZENITH_DEG, azimuth_deg=0.0)
+    data["landmarks"].update({"count": 8, "resolution": 40, **landmarks})
+    return problem_from_dict(data)
+
+
+@pytest.fixture(scope="module")
+def problem() -> Problem:
+    return small_problem()
+
+
+@pytest.fixture(scope="module")
+def scene(problem: Problem) -> Scene:
+    return Scene.from_problem(problem)
+
+
+@pytest.fixture(scope="module")
+def result(problem: Problem, scene: Scene) -> lm_module.LandmarkSet:
+    return find_landmarks(problem, scene)
+
+
+def test_distance_vanishes_at_the_reference_light(problem: Problem, scene: Scene) -> None:
+    objective = Objective.from_problem(problem, scene)
+    ref = scene.sphere.position(math.radians(REF_ZENITH_DEG), 0.0)
+    assert exact_cost(scene, objective, ref) == pytest.approx(0.0, abs=1e-15)
+    assert exact_cost(scene, objective, scene.sphere.position(math.radians(25.0), 0.0)) > 1e-5
+
+
+def test_reference_azimuth_returns_the_reference_zenith(result: lm_module.LandmarkSet) -> None:
+    first = result.landmarks[0]
+    assert first.azimuth == 0.0
+    assert math.degrees(first.zenith) == pytest.approx(REF_ZENITH_DEG, abs=0.05)
+    assert first.cost < 1e-8
+
+
+def test_mirror_symmetric_face_gives_mirror_symmetric_landmarks(result: lm_module.LandmarkSet) -> None:
+    # The face is symmetric about the vertical plane x_S = 0 (y_S up), which maps φ to π − φ.
+    m = len(result)
+    for j, lm in enumerate(result.landmarks):
+        mirror = result.landmarks[(m // 2 - j) % m]
+        assert math.isclose(np.mod(np.pi - lm.azimuth, 2 * np.pi), mirror.azimuth, abs_tol=1e-9)
+        assert math.degrees(lm.zenith) == pytest.approx(math.degrees(mirror.zenith), abs=0.05)
+        assert lm.cost == pytest.approx(mirror.cost, rel=1e-3, abs=1e-12)
+
+
+def test_never_worse_than_the_sweep(problem: Problem, scene: Scene, result: lm_module.LandmarkSet) -> None:
+    objective = Objective.from_problem(problem, scene)
+    grid = result.sweep
+    assert grid.cost.shape == (len(result), grid.zenith.size)
+    for lm, row in zip(result.landmarks, grid.cost, strict=True):
+        best_sample = grid.zenith[np.argmin(row)]
+        sample_cost = exact_cost(scene, objective, scene.sphere.position(best_sample, lm.azimuth))
+        assert lm.cost <= sample_cost + 1e-15
+        assert scene.sphere.zenith_min <= lm.zenith <= scene.sphere.zenith_max
+        np.testing.assert_allclose(lm.position, scene.sphere.position(lm.zenith, lm.azimuth))
+    assert result.resolution == (40, 40)
+    assert result.histograms.shape == (len(result), problem.objective.bins)
+
+
+def test_nlp_built_once_and_progress_reported(problem: Problem, scene: Scene, monkeypatch) -> None:
+    built = []
+    real = ca.nlpsol
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        built.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(lm_module.ca, "nlpsol", counting)
+    calls: list[tuple[int, int]] = []
+    small = small_problem(count=3, seeds=2)
+    out = find_landmarks(small, scene, progress=lambda done, total: calls.append((done, total)))
+    assert built == ["zenith_refiner"]
+    assert calls == [(1, 3), (2, 3), (3, 3)]
+    assert out.iterations > 0
+
+
+def test_free_mode_keeps_the_separation(scene: Scene) -> None:
+    free = small_problem(mode="free", count=4, min_separation_deg=8.0, sweep_step_deg=6.0, resolution=32)
+    out = find_landmarks(free, Scene.from_problem(free))
+    assert len(out) == 4
+    d = (out.positions - scene.sphere.center) / scene.sphere.radius
+    angles = np.degrees(np.arccos(np.clip(d @ d.T, -1, 1)))
+    np.fill_diagonal(angles, np.inf)
+    assert angles.min() >= 8.0 - 1e-6
+    # The best position on the cap is the reference light itself (or its mirror image).
+    assert out.landmarks[0].cost < 1e-6
+    assert math.degrees(out.landmarks[0].zenith) == pytest.approx(REF_ZENITH_DEG, abs=0.5)
+
+
+def test_free_mode_too_many_landmarks_is_a_problem_error() -> None:
+    crowded = small_problem(mode="free", count=6, min_separation_deg=60.0, sweep_step_deg=10.0, resolution=24)
+    with pytest.raises(ProblemError, match="landmarks.count"):
+        find_landmarks(crowded)
+
+
+def test_helpers() -> None:
+    np.testing.assert_array_equal(local_minima([3.0, 1.0, 2.0, 0.5, 0.5, 4.0, 0.1]), [6, 3, 1])
+    sphere = Scene.from_problem(small_problem()).sphere
+    grid = zenith_grid(sphere, math.radians(7.0))
+    assert grid[0] == sphere.zenith_min and grid[-1] == sphere.zenith_max
+    assert np.diff(grid).max() <= math.radians(7.0) + 1e-12
+
+
+def test_search_scene_keeps_the_aspect(problem: Problem, scene: Scene) -> None:
+    low = search_scene(problem, scene)
+    assert (low.camera.width, low.camera.height) == (40, 40)
+    assert search_scene(small_problem(resolution=64), scene) is scene
+
+
+def test_landmark_figures(result: lm_module.LandmarkSet, scene: Scene, tmp_path: Path) -> None:
+    paths = save_landmark_figures(result, scene, tmp_path / "figs")
+    assert [p.name for p in paths] == [
+        "landmarks_polar.png",
+        "landmarks_histograms.png",
+        "landmarks_images.png",
+        "landmarks_cost.png",
+    ]
+    for p in paths:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
