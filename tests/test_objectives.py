@@ -3,7 +3,9 @@ the soft histogram against hand-computed bins, references from images (PNG, NPY)
 
 from __future__ import annotations
 
+import copy
 import math
+import tomllib
 from pathlib import Path
 
 import casadi as ca
@@ -25,6 +27,8 @@ from optlight.objectives import (
     reference_from_bins,
     reference_from_pixels,
 )
+from optlight.scene import Scene
+from optlight.spec import PROBLEMS_DIR, Problem, problem_from_dict
 
 P = 40
 HIST = SoftHistogram(bins=8, sigma_bins=1.0)
@@ -164,3 +168,102 @@ def test_read_image_png_npy_and_errors(tmp_path: Path) -> None:
     np.save(tmp_path / "cube.npy", np.zeros((2, 2, 2)))
     with pytest.raises(ProblemError, match="shape"):
         read_image(tmp_path / "cube.npy", 1.0, "p.toml", "objective.reference.image")
+
+
+# --------------------------------------------------------------------------------------------
+# With a scene: references from image files, the composed CasADi function
+# --------------------------------------------------------------------------------------------
+
+
+def face_problem(tmp_path: Path, reference: dict, terms: list[dict] | None = None) -> Problem:
+    """The default face at 48×48 px with the given [objective.reference] (and terms), written to
+    ``tmp_path`` so that relative image paths resolve there."""
+    with (PROBLEMS_DIR / "default.toml").open("rb") as f:
+        data = copy.deepcopy(tomllib.load(f))
+    data["camera"].update(width=48, height=48)
+    data["object"]["face"] = {"resolution": 48}
+    data["objective"]["reference"] = reference
+    if terms is not None:
+        data["objective"]["terms"] = terms
+    return problem_from_dict(data, source=tmp_path / "p.toml")
+
+
+@pytest.fixture(scope="module")
+def face_scene() -> Scene:
+    return Scene.from_problem(face_problem(Path("."), {"kind": "light"}))
+
+
+LIGHT = (math.radians(23.0), math.radians(130.0))
+
+
+def test_reference_image_round_trips_png_and_npy(tmp_path: Path, face_scene: Scene) -> None:
+    from PIL import Image
+
+    a = face_scene.sphere.position(*LIGHT)
+    image = face_scene.render(a)
+    np.save(tmp_path / "ref.npy", image)
+    Image.fromarray(np.round(image / face_scene.light.saturation * 65535).astype(np.uint16)).save(
+        tmp_path / "ref.png"
+    )
+    other = face_scene.sphere.position(math.radians(40.0), 0.0)
+    terms = [{"kind": "histogram", "distance": "emd2"}, {"kind": "image", "weight": 0.5}]
+    for name in ("ref.npy", "ref.png"):
+        problem = face_problem(tmp_path, {"kind": "image", "image": name}, terms)
+        objective = Objective.from_problem(problem, face_scene)
+        at_light = objective.numpy(face_scene.pixels(a))
+        assert at_light == pytest.approx(0.0, abs=1e-9), name
+        assert objective.numpy(face_scene.pixels(other)) > 1e3 * max(at_light, 1e-12)
+
+
+def test_reference_image_of_another_size_and_mask(tmp_path: Path, face_scene: Scene) -> None:
+    from PIL import Image
+
+    a = face_scene.sphere.position(*LIGHT)
+    big = Scene.from_problem(face_problem(tmp_path, {"kind": "light"}), width=96, height=96)
+    np.save(tmp_path / "big.npy", big.render(a))
+    mask = np.zeros((48, 48), np.uint8)
+    mask[:, :24] = 255
+    Image.fromarray(mask).save(tmp_path / "mask.png")
+    problem = face_problem(tmp_path, {"kind": "image", "image": "big.npy", "mask": "mask.png"})
+    objective = Objective.from_problem(problem, face_scene)
+    assert objective.selection is not None
+    columns = face_scene.gbuffer.pixel_index[objective.selection] % 48
+    assert columns.max() < 24 and objective.selection.size > 100
+    # Resampled from 96² the reference is close to, not equal to, the 48² render at the same light.
+    at_light = objective.numpy(face_scene.pixels(a))
+    assert at_light < 0.05 * objective.numpy(face_scene.pixels(face_scene.sphere.position(0.7, 4.0)))
+
+
+def test_bad_reference_image_names_the_key(tmp_path: Path, face_scene: Scene) -> None:
+    (tmp_path / "bad.png").write_bytes(b"\x89PNG broken")
+    problem = face_problem(tmp_path, {"kind": "image", "image": "bad.png"})
+    with pytest.raises(ProblemError, match="objective.reference.image"):
+        Objective.from_problem(problem, face_scene)
+    bins = face_problem(tmp_path, {"kind": "bins", "bins": [1.0] * 32}, [{"kind": "image"}])
+    with pytest.raises(ProblemError, match=r"objective.terms\[0\].kind"):
+        Objective.from_problem(bins, face_scene)
+
+
+def test_objective_function_is_the_casadi_twin_through_the_smooth_model(
+    tmp_path: Path, face_scene: Scene
+) -> None:
+    terms = [
+        {"kind": "histogram", "distance": "chi2"},
+        {"kind": "contrast", "target": 0.2, "weight": 2.0},
+        {"kind": "saturation", "weight": 0.3},
+        {"kind": "shadow", "weight": 0.3, "level": 0.1},
+    ]
+    objective = Objective.from_problem(face_problem(tmp_path, {"kind": "light"}, terms), face_scene)
+    a = face_scene.sphere.position(*LIGHT)
+    v = face_scene.visibility(a)
+    smooth = np.asarray(face_scene.luminance(smooth=True)(a, v)).ravel()
+    assert float(objective.function(a, v)) == pytest.approx(objective.numpy(smooth), rel=1e-10)
+    # Gradient with respect to the light position against central differences of the function.
+    x = ca.MX.sym("a", 3)
+    grad = np.asarray(ca.Function("g", [x], [ca.gradient(objective.function(x, v), x)])(a)).ravel()
+    eps = 1e-6
+    fd = [
+        (float(objective.function(a + e, v)) - float(objective.function(a - e, v))) / (2 * eps)
+        for e in np.eye(3) * eps
+    ]
+    np.testing.assert_allclose(grad, fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
