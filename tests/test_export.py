@@ -1,0 +1,224 @@
+"""Export: .lp direction convention, the results folder, refusal of a failing plan."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from optlight.errors import VerificationError
+from optlight.export import image_names, json_safe, lp_direction, write_results
+from optlight.geometry import LightSphere, aim_rotation, sphere_frame
+from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.scene.camera import Camera
+from optlight.verify import VerificationReport, verify_trajectory
+from optlight.viz.trajectory_figures import save_trajectory_figure, trajectory_figure
+
+CENTER = np.array([0.45, -0.25, 0.35])
+CAMERA = Camera.look_at([0.45, -1.05, 0.35], CENTER, 64, 48)
+SPHERE = LightSphere(CENTER, 0.4, sphere_frame(CENTER, CAMERA.position))
+LOWER, UPPER = np.array([0.0, -4.0]), np.array([1.3, 4.0])
+VMAX, AMAX = np.array([0.8, 1.2]), np.array([2.0, 3.0])
+LANDMARKS_Q = np.array([[0.4, 0.0], [0.6, 1.0], [0.5, 2.0]])
+NAMES = ["zenith", "azimuth"]
+
+
+def light_pose(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = SPHERE.position(q[0], q[1])
+    return a, aim_rotation(a, CENTER, SPHERE.rotation[:, 0])
+
+
+def plan(scale: float = 1.0) -> tuple[Trajectory, VerificationReport]:
+    s = np.linspace(0, 1, 6)[:, None]
+    segments = [a + (b - a) * s for a, b in zip(LANDMARKS_Q[:-1], LANDMARKS_Q[1:], strict=True)]
+    traj = time_parameterize(segments, VMAX, AMAX, 0.3, joint_names=NAMES).time_scaled(scale)
+    report = verify_trajectory(
+        traj,
+        light_pose=light_pose,
+        lower=LOWER,
+        upper=UPPER,
+        velocity_limit=VMAX,
+        acceleration_limit=AMAX,
+        sphere=SPHERE,
+        landmark_positions=SPHERE.position(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1]),
+        planned_path=None,
+    )
+    return traj, report
+
+
+def directions() -> np.ndarray:
+    return CAMERA.to_camera_frame(SPHERE.direction(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1]))
+
+
+def test_lp_direction_hand_worked() -> None:
+    # frontal light, between object and camera: in the camera frame it points back along -z
+    np.testing.assert_allclose(lp_direction([0.0, 0.0, -1.0]), [0.0, 0.0, 1.0])
+    # light above the object: image y points down, so the camera-frame direction has y < 0
+    up = lp_direction(np.array([0.0, -1.0, -1.0]) / np.sqrt(2))
+    assert up[1] > 0 and up[2] > 0
+    np.testing.assert_allclose(up, [0.0, 1 / np.sqrt(2), 1 / np.sqrt(2)])
+    # light to the right of the image stays on the right
+    np.testing.assert_allclose(lp_direction([[1.0, 0.0, 0.0]]), [[1.0, 0.0, 0.0]])
+    with pytest.raises(ValueError):
+        lp_direction([1.0, 0.0])
+
+
+def test_lp_direction_from_the_world_through_the_camera() -> None:
+    # camera on -y looking at O along +y, world z up: a light straight above O is at the image top,
+    # a light at zenith 0 sits between object and camera
+    above = lp_direction(CAMERA.to_camera_frame([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(above, [0.0, 1.0, 0.0], atol=1e-12)
+    frontal = lp_direction(CAMERA.to_camera_frame(SPHERE.direction(0.0, 0.0)))
+    np.testing.assert_allclose(frontal, [0.0, 0.0, 1.0], atol=1e-12)
+    # zenith 90°, azimuth 90°: along the sphere's y axis, which is up in the image
+    np.testing.assert_allclose(
+        lp_direction(CAMERA.to_camera_frame(SPHERE.direction(np.pi / 2, np.pi / 2))), [0, 1, 0], atol=1e-12
+    )
+
+
+def test_write_results(tmp_path) -> None:
+    traj, report = plan()
+    assert report.passed, report.summary()
+    fig = trajectory_figure(traj, lower=LOWER, upper=UPPER, velocity_limit=VMAX, acceleration_limit=AMAX)
+    out = tmp_path / "results" / "run"
+    files = write_results(
+        out,
+        trajectory=traj,
+        report=report,
+        plan_dict={"problem": "test", "landmarks_q": LANDMARKS_Q, "solve_s": np.float64(1.5)},
+        joint_names=NAMES,
+        light_directions_camera=directions(),
+        image_pattern="img_{index:03d}.png",
+        figures={"trajectory": fig},
+    )
+    assert [f.name for f in files] == ["trajectory.csv", "plan.json", "lights.lp", "trajectory.png"]
+    assert all(f.is_file() and f.stat().st_size > 0 for f in files)
+    assert sorted(p.name for p in (tmp_path / "results").iterdir()) == ["run"]  # no staging left
+
+    lines = (out / "lights.lp").read_text().splitlines()
+    assert lines[0] == "3"
+    names = [line.split()[0] for line in lines[1:]]
+    assert names == ["img_000.png", "img_001.png", "img_002.png"]
+    xyz = np.array([[float(x) for x in line.split()[1:]] for line in lines[1:]])
+    np.testing.assert_allclose(xyz, lp_direction(directions()), atol=1e-8)
+    assert np.all(xyz[:, 2] > 0)  # lights on the camera side of the object
+
+    data = json.loads((out / "plan.json").read_text())
+    assert data["problem"] == "test" and data["landmarks_q"] == LANDMARKS_Q.tolist()
+    assert data["verification"]["passed"] is True
+    assert data["versions"]["toppra"] == "0.6.10" and data["versions"]["numpy"]
+    assert data["timing"]["capture_times_s"] == pytest.approx(traj.capture_times.tolist())
+    assert data["timing"]["joint_names"] == NAMES
+
+    with (out / "trajectory.csv").open() as f:
+        assert next(csv.reader(f))[:3] == ["t", "q_zenith", "q_azimuth"]
+    back = Trajectory.from_csv(
+        out / "trajectory.csv", landmark_intervals=data["timing"]["landmark_intervals_s"]
+    )
+    np.testing.assert_allclose(back.capture_times, traj.capture_times)
+
+
+def test_refuses_a_failing_report_and_leaves_nothing(tmp_path) -> None:
+    traj, report = plan(scale=0.5)
+    assert not report.passed
+    out = tmp_path / "sub" / "run"
+    with pytest.raises(VerificationError, match="refusing") as err:
+        write_results(
+            out,
+            trajectory=traj,
+            report=report,
+            plan_dict={},
+            joint_names=NAMES,
+            light_directions_camera=directions(),
+            image_pattern="img_{index:03d}.png",
+        )
+    assert err.value.report is report
+    assert "velocity" in str(err.value)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
+    traj, report = plan()
+
+    class Broken:
+        def savefig(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
+            raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        write_results(
+            tmp_path / "run",
+            trajectory=traj,
+            report=report,
+            plan_dict={},
+            joint_names=NAMES,
+            light_directions_camera=directions(),
+            image_pattern="img_{index:03d}.png",
+            figures={"broken": Broken()},
+        )
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(TypeError, match="plan_dict.thing"):
+        write_results(
+            tmp_path / "run",
+            trajectory=traj,
+            report=report,
+            plan_dict={"plan_dict": {"thing": object()}},
+            joint_names=NAMES,
+            light_directions_camera=directions(),
+            image_pattern="img_{index:03d}.png",
+        )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_existing_folder_needs_overwrite(tmp_path) -> None:
+    traj, report = plan()
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "old.txt").write_text("old")
+    kwargs = dict(
+        trajectory=traj,
+        report=report,
+        plan_dict={},
+        joint_names=NAMES,
+        light_directions_camera=directions(),
+        image_pattern="img_{index:03d}.png",
+    )
+    with pytest.raises(FileExistsError):
+        write_results(out, **kwargs)
+    assert (out / "old.txt").exists()
+    write_results(out, overwrite=True, **kwargs)
+    assert not (out / "old.txt").exists() and (out / "lights.lp").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_bad_inputs_are_rejected_before_writing(tmp_path) -> None:
+    traj, report = plan()
+    base = dict(trajectory=traj, report=report, plan_dict={}, joint_names=NAMES, image_pattern="i{index}.png")
+    with pytest.raises(ValueError, match="unit vectors"):
+        write_results(tmp_path / "a", light_directions_camera=2 * directions(), **base)
+    with pytest.raises(ValueError, match="one per capture"):
+        write_results(tmp_path / "a", light_directions_camera=directions()[:2], **base)
+    with pytest.raises(ValueError, match="keys"):
+        write_results(
+            tmp_path / "a", light_directions_camera=directions(), **{**base, "plan_dict": {"versions": 1}}
+        )
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match="repeated"):
+        image_names("img.png", 3)
+    with pytest.raises(ValueError, match="whitespace"):
+        image_names("img {index}.png", 2)
+
+
+def test_json_safe() -> None:
+    out = json_safe({"a": np.arange(3), "b": (np.float32(0.5), np.nan), "c": {1: np.bool_(True)}})
+    assert out == {"a": [0, 1, 2], "b": [0.5, None], "c": {"1": True}}
+    json.dumps(out, allow_nan=False)
+
+
+def test_trajectory_figure_file(tmp_path) -> None:
+    traj, _ = plan()
+    path = save_trajectory_figure(
+        tmp_path / "t.png", traj, lower=LOWER, upper=UPPER, velocity_limit=VMAX, acceleration_limit=AMAX
+    )
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
