@@ -79,7 +79,7 @@ class ObjectSpec:
     camera, +y up (DESIGN §2), so a mesh's front is its +z side and its top is +y."""
 
     kind: Literal["face", "sphere", "mesh"] = key("face", "what the camera looks at")
-    center_m: Vec3 = key((0.45, -0.25, 0.35), "object centre O in the world frame", unit="m")
+    center_m: Vec3 = key((0.35, 0.0, 0.45), "object centre O in the world frame", unit="m")
     radius_m: float = key(0.1, "sphere radius (kind = sphere)", unit="m", lo=0.0, lo_open=True)
     path: str | None = key(None, "mesh file trimesh reads: OBJ, PLY, STL, GLB (kind = mesh)")
     scale: float = key(1.0, "factor from mesh units to metres (kind = mesh)", lo=0.0, lo_open=True)
@@ -91,7 +91,7 @@ class ObjectSpec:
 class CameraSpec:
     """Pinhole camera, OpenCV axes (z forward, y down), placed by position and look-at point."""
 
-    position_m: Vec3 = key((0.45, -1.05, 0.35), "camera centre in the world frame", unit="m")
+    position_m: Vec3 = key((-0.343, -0.4, 0.45), "camera centre in the world frame", unit="m")
     look_at_m: Vec3 | None = key(
         None, "point the optical axis passes through (default: object centre)", unit="m"
     )
@@ -275,9 +275,21 @@ class SolverSpec:
 
     max_iter: int = key(300, "IPOPT iteration limit", lo=1)
     tol: float = key(1e-8, "IPOPT tolerance", lo=0.0, lo_open=True)
-    ik_damping: float = key(1e-4, "damping λ² of the pseudoinverse J# = Jᵀ(JJᵀ + λ²I)⁻¹", lo=0.0)
+    ik_damping: float = key(1e-6, "damping λ² of the pseudoinverse J# = Jᵀ(JJᵀ + λ²I)⁻¹", lo=0.0)
     ik_max_iter: int = key(200, "generalized IK iteration limit", lo=1)
     ik_tol: float = key(1e-9, "generalized IK residual tolerance (squared norm)", lo=0.0, lo_open=True)
+    ik_max_step_rad: float = key(
+        0.8, "largest joint change in one generalized IK iteration", unit="rad", lo=0.0, lo_open=True
+    )
+    ik_joint_limit_gain: float = key(
+        0.05, "null-space gain of joint-limit avoidance in the generalized IK (0 = off)", lo=0.0
+    )
+    ik_manipulability_gain: float = key(
+        0.0, "null-space gain of manipulability (−log w) in the generalized IK (0 = off)", lo=0.0
+    )
+    ik_posture_gain: float = key(
+        0.0, "null-space gain of the posture task (towards the reference) in the generalized IK (0 = off)", lo=0.0
+    )
     verbose: bool = key(False, "print solver output")
 
 
