@@ -1,0 +1,482 @@
+"""Robots by name (example-robot-data) or from a user URDF, in joint-angle coordinates.
+
+A :class:`Robot` is a pinocchio model of the arm that carries the light, with
+
+- the hand/gripper joints locked (``pin.buildReducedModel``), so every remaining joint moves the light;
+- the base placement ``T_WB`` (``base_position_m``, ``base_rpy_deg``) folded into the model: every
+  joint and frame attached to the universe is pre-multiplied by ``T_WB``, so pinocchio's ``oMi``,
+  ``oMf`` and everything built from the model (the CasADi mirror, Jacobians, geometry) are in the
+  world frame W;
+- two frames added at the end of the model: ``flange`` = the robot's tool frame, rotated where needed
+  so that its +z points out of the tool, and ``light`` = ``flange · T(light_offset_m, light_rpy_deg)``.
+  The light emits along +z of ``light`` (DESIGN §2).
+
+**Joint coordinates.** The rest of optlight works with joint *angles* θ ∈ Rⁿ, n = ``model.nv``, one
+per joint, in URDF joint order. Pinocchio stores a continuous joint (kinova joints 1, 4, 6) as
+(cos θ, sin θ); :meth:`Robot.to_pin` / :meth:`Robot.from_pin` convert. Continuous joints get the limits
+±2π in θ (two full turns of cable; a trajectory never needs more), every other joint its URDF limits.
+
+**Supported robots** (``SUPPORTED_ROBOTS``), their flange frames, reference configurations and default
+acceleration limits (rad/s², used where ``robot.acceleration_limit`` is not set):
+
+========  =======================  =============================  ===============================
+robot     flange (URDF frame)      reference θ_ref                acceleration limit (rad/s²)
+========  =======================  =============================  ===============================
+panda     ``panda_hand_tcp``       SRDF ``default``               3.75 1.875 2.5 3.125 3.75 5 5 [1]
+ur3/5/10  ``tool0``                (0, −π/2, π/2, −π/2, −π/2, 0)  2.0 [2]
+xarm7     ``link_eef``             (0, −0.5, 0, 1, 0, 1.5, 0)     2.0 [2]
+kinova    ``j2s6s200_end_effector``  SRDF ``arm_up`` [3]          1.0 [2]
+z1        ``gripperStator``        (0, 1.2, −1.0, −0.2, 0, 0)     2.0 [2]
+========  =======================  =============================  ===============================
+
+[1] MoveIt's ``panda_moveit_config``: a quarter of libfranka's hard limits (15, 7.5, 10, 12.5, 15, 20,
+20). [2] Conservative defaults of ours, not manufacturer figures: set ``robot.acceleration_limit``
+for a real cell. [3] Joint values outside the URDF limits are wrapped by ±2π (the same pose).
+
+Kinova's and z1's tool frames point their +x out of the tool; their ``flange`` is rotated by
+Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked (closed).
+Velocity limits are the URDF's; ``robot.velocity_scale`` is *not* applied here (the timing applies it).
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.errors import RobotError
+from optlight.spec import Problem, RobotSpec
+
+if TYPE_CHECKING:
+    import casadi
+
+Array = NDArray[np.float64]
+
+#: Robot names :func:`load_robot` knows (files from example-robot-data).
+SUPPORTED_ROBOTS: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
+
+#: Limits given to continuous joints, in θ (rad).
+CONTINUOUS_LIMIT = 2 * np.pi
+
+#: Acceleration limit of a user URDF when ``robot.acceleration_limit`` is not set (rad/s²).
+DEFAULT_ACCELERATION_LIMIT = 2.0
+
+_UR_REFERENCE = (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0)
+
+
+@dataclass(frozen=True)
+class RobotInfo:
+    """Where a named robot's files are and how optlight uses it.
+
+    ``urdf``/``srdf`` are relative to example-robot-data's ``robots`` folder; ``tool_rpy_deg`` rotates
+    the URDF tool frame into the flange frame (+z out of the tool); ``reference`` names an SRDF
+    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0.
+    """
+
+    urdf: str
+    srdf: str | None
+    tool_frame: str
+    tool_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    reference: str | None = None
+    theta_ref: tuple[float, ...] | None = None
+    locked_joints: tuple[str, ...] = ()
+    acceleration_limit: tuple[float, ...] | float = DEFAULT_ACCELERATION_LIMIT
+
+
+ROBOTS: dict[str, RobotInfo] = {
+    "panda": RobotInfo(
+        "panda_description/urdf/panda.urdf",
+        "panda_description/srdf/panda.srdf",
+        "panda_hand_tcp",
+        reference="default",
+        locked_joints=("panda_finger_joint1", "panda_finger_joint2"),
+        acceleration_limit=(3.75, 1.875, 2.5, 3.125, 3.75, 5.0, 5.0),
+    ),
+    "ur3": RobotInfo("ur_description/urdf/ur3_robot.urdf", None, "tool0", theta_ref=_UR_REFERENCE),
+    "ur5": RobotInfo(
+        "ur_description/urdf/ur5_robot.urdf", "ur_description/srdf/ur5.srdf", "tool0", theta_ref=_UR_REFERENCE
+    ),
+    "ur10": RobotInfo("ur_description/urdf/ur10_robot.urdf", None, "tool0", theta_ref=_UR_REFERENCE),
+    "xarm7": RobotInfo(
+        "xarm_description/urdf/xarm7.urdf",
+        "xarm_description/srdf/xarm7.srdf",
+        "link_eef",
+        theta_ref=(0.0, -0.5, 0.0, 1.0, 0.0, 1.5, 0.0),
+    ),
+    "kinova": RobotInfo(
+        "kinova_description/robots/kinova.urdf",
+        "kinova_description/srdf/kinova.srdf",
+        "j2s6s200_end_effector",
+        tool_rpy_deg=(0.0, 90.0, 0.0),
+        reference="arm_up",
+        acceleration_limit=1.0,
+    ),
+    "z1": RobotInfo(
+        "z1_description/urdf/z1.urdf",
+        "z1_description/srdf/z1.srdf",
+        "gripperStator",
+        tool_rpy_deg=(0.0, 90.0, 0.0),
+        theta_ref=(0.0, 1.2, -1.0, -0.2, 0.0, 0.0),
+        locked_joints=("jointGripper",),
+    ),
+}
+
+_REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"}
+_PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
+_CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned"}
+
+
+def example_robot_data_dir() -> Path:
+    """The ``share`` folder of the installed example-robot-data wheel (its ``package://`` root)."""
+    try:
+        dist = importlib.metadata.distribution("example-robot-data")
+    except importlib.metadata.PackageNotFoundError:
+        raise RobotError("example-robot-data is not installed (pip install example-robot-data)") from None
+    share = Path(str(dist.locate_file("cmeel.prefix"))) / "share"
+    if not (share / "example-robot-data" / "robots").is_dir():
+        raise RobotError(f"example-robot-data has no robots folder under {share}")
+    return share
+
+
+def placement(position: ArrayLike, rpy_deg: ArrayLike) -> pin.SE3:
+    """SE(3) from a position (m) and URDF roll-pitch-yaw (deg): R = Rz(yaw)·Ry(pitch)·Rx(roll)."""
+    r, p, y = np.deg2rad(np.asarray(rpy_deg, float))
+    return pin.SE3(pin.rpy.rpyToMatrix(r, p, y), np.asarray(position, float))
+
+
+class JointCoordinates:
+    """The map between joint angles θ (n = nv, URDF joint order) and pinocchio's q (nq).
+
+    Revolute and prismatic joints: q = θ. Continuous joints: q = (cos θ, sin θ), θ = atan2(sin, cos).
+    """
+
+    def __init__(self, model: pin.Model) -> None:
+        joints = sorted(model.joints[1:], key=lambda j: j.idx_v)
+        self.nq, self.n = int(model.nq), int(model.nv)
+        self.names: list[str] = [model.names[j.id] for j in joints]
+        self.kinds: list[str] = [j.shortname() for j in joints]
+        self.continuous = np.array([k in _CONTINUOUS for k in self.kinds], bool)
+        self.idx_q = np.array([j.idx_q for j in joints], int)
+        self._v_angle = np.flatnonzero(~self.continuous)
+        self._q_angle = self.idx_q[~self.continuous]
+        self._v_cont = np.flatnonzero(self.continuous)
+        self._q_cos = self.idx_q[self.continuous]
+        self._q_sin = self._q_cos + 1
+        self.identity = bool(not self.continuous.any() and np.array_equal(self.idx_q, np.arange(self.n)))
+
+    def to_pin(self, theta: ArrayLike) -> Array:
+        """Pinocchio configuration q (..., nq) from joint angles θ (..., n): continuous joints become
+        (cos θ, sin θ), every other joint is copied."""
+        theta = np.asarray(theta, float)
+        if self.identity:
+            return theta.copy()
+        q = np.empty(theta.shape[:-1] + (self.nq,))
+        q[..., self._q_angle] = theta[..., self._v_angle]
+        c = theta[..., self._v_cont]
+        q[..., self._q_cos] = np.cos(c)
+        q[..., self._q_sin] = np.sin(c)
+        return q
+
+    def from_pin(self, q: ArrayLike) -> Array:
+        """Joint angles θ (..., n) from a pinocchio configuration q (..., nq); a continuous joint's
+        angle is atan2(sin, cos) ∈ (−π, π]."""
+        q = np.asarray(q, float)
+        if self.identity:
+            return q.copy()
+        theta = np.empty(q.shape[:-1] + (self.n,))
+        theta[..., self._v_angle] = q[..., self._q_angle]
+        theta[..., self._v_cont] = np.arctan2(q[..., self._q_sin], q[..., self._q_cos])
+        return theta
+
+
+class Robot:
+    """The arm carrying the light, in joint-angle coordinates θ (see the module docstring).
+
+    Attributes: ``name``; pinocchio ``model`` and its scratch ``data`` (used by the numeric methods);
+    ``flange_frame_id``/``light_frame_id`` (frames ``flange``, ``light``); ``joint_names`` (URDF names,
+    θ order); ``n``; ``lower``/``upper`` (rad or m), ``velocity_limit`` (URDF, rad/s or m/s),
+    ``acceleration_limit`` (rad/s² or m/s²), ``theta_ref``: arrays of length n. ``base_placement`` is
+    T_WB. ``urdf_path``/``package_dirs``/``locked_joints`` rebuild geometry (:meth:`geometry_model`).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        model: pin.Model,
+        *,
+        theta_ref: ArrayLike | None,
+        acceleration_limit: ArrayLike,
+        base_placement: pin.SE3,
+        urdf_path: Path,
+        package_dirs: Sequence[Path],
+        locked_joints: dict[str, float],
+    ) -> None:
+        self.name = name
+        self.model = model
+        self.data = model.createData()
+        self.base_placement = base_placement
+        self.urdf_path = urdf_path
+        self.package_dirs = list(package_dirs)
+        self.locked_joints = dict(locked_joints)
+        self.flange_frame_id = model.getFrameId("flange")
+        self.light_frame_id = model.getFrameId("light")
+        self.n = int(model.nv)
+        coords = JointCoordinates(model)
+        self.joint_names: list[str] = coords.names
+        self.joint_kinds: list[str] = coords.kinds
+        #: True when q = θ (no continuous joint): the hot paths skip the conversion.
+        self.angles_are_q = coords.identity
+        self.to_pin = coords.to_pin
+        self.from_pin = coords.from_pin
+        cont = coords.continuous
+        angle_v, angle_q = np.flatnonzero(~cont), coords.idx_q[~cont]
+
+        self.lower = np.full(self.n, -CONTINUOUS_LIMIT)
+        self.upper = np.full(self.n, CONTINUOUS_LIMIT)
+        self.lower[angle_v] = model.lowerPositionLimit[angle_q]
+        self.upper[angle_v] = model.upperPositionLimit[angle_q]
+        self.velocity_limit = np.array(model.velocityLimit, float).copy()
+        self.acceleration_limit = np.broadcast_to(np.asarray(acceleration_limit, float), (self.n,)).copy()
+        if theta_ref is None:
+            ref = np.where(cont, 0.0, 0.5 * (self.lower + self.upper))
+        else:
+            ref = _wrap_into_limits(np.asarray(theta_ref, float), self.lower, self.upper)
+        self.theta_ref = ref
+        for arr in (self.lower, self.upper, self.velocity_limit, self.acceleration_limit, self.theta_ref):
+            arr.setflags(write=False)
+        self._symbolic: casadi.Function | None = None
+
+    def __repr__(self) -> str:
+        tool = self.model.frames[self.model.frames[self.flange_frame_id].parentFrame].name
+        return f"Robot({self.name!r}, n={self.n}, flange at {tool!r})"
+
+    # ---------------------------------------------------------------- coordinates
+    def within_limits(self, theta: ArrayLike, tol: float = 1e-9) -> bool:
+        """Whether lower − tol ≤ θ ≤ upper + tol for every joint."""
+        theta = np.asarray(theta, float)
+        return bool(np.all(theta >= self.lower - tol) and np.all(theta <= self.upper + tol))
+
+    def random_configuration(self, rng: np.random.Generator, size: int | None = None) -> Array:
+        """Joint angles drawn uniformly within the limits; shape (n,) or (size, n)."""
+        shape = (self.n,) if size is None else (size, self.n)
+        return rng.uniform(self.lower, self.upper, size=shape)
+
+    # ---------------------------------------------------------------- numeric kinematics
+    def light_pose(self, theta: ArrayLike) -> tuple[Array, Array]:
+        """Light position a_L (3,) in m and rotation R_WL (3, 3) in the world frame (pinocchio)."""
+        pin.forwardKinematics(self.model, self.data, self.to_pin(theta))
+        m = pin.updateFramePlacement(self.model, self.data, self.light_frame_id)
+        return m.translation.copy(), m.rotation.copy()
+
+    def frame_pose(self, frame: str, theta: ArrayLike) -> pin.SE3:
+        """World placement of a frame of the model (any URDF link, ``flange`` or ``light``)."""
+        fid = self.frame_id(frame)
+        pin.forwardKinematics(self.model, self.data, self.to_pin(theta))
+        return pin.updateFramePlacement(self.model, self.data, fid).copy()
+
+    def light_jacobian(self, theta: ArrayLike) -> Array:
+        """Light-frame Jacobian (6, n) in LOCAL_WORLD_ALIGNED: rows 0–2 the velocity of the light's
+        origin (m/s), rows 3–5 its angular velocity (rad/s), both in world axes, per unit θ̇."""
+        pin.computeJointJacobians(self.model, self.data, self.to_pin(theta))
+        return pin.getFrameJacobian(self.model, self.data, self.light_frame_id, pin.LOCAL_WORLD_ALIGNED)
+
+    def frame_id(self, frame: str) -> int:
+        """Index of a frame by name; :class:`RobotError` lists the frames when it does not exist."""
+        return _find_frame(self.model, frame, self.name)
+
+    # ---------------------------------------------------------------- symbolic kinematics
+    @property
+    def symbolic_light_pose(self) -> casadi.Function:
+        """CasADi ``light_pose``: θ (n×1) → (a_L (3×1), R_WL (3×3)); built once, then cached."""
+        if self._symbolic is None:
+            from optlight.robot.kinematics import symbolic_frame_pose
+
+            self._symbolic = symbolic_frame_pose(self, self.light_frame_id, name="light_pose")
+        return self._symbolic
+
+    # ---------------------------------------------------------------- geometry
+    def geometry_model(self, kind: Literal["collision", "visual"] = "collision") -> pin.GeometryModel:
+        """Collision or visual geometry of the robot, consistent with :attr:`model`: locked joints
+        reduced away, base placement applied. Meshes are read from the URDF's packages."""
+        gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
+        full = pin.buildModelFromUrdf(str(self.urdf_path))
+        dirs = [str(p) for p in self.package_dirs]
+        try:
+            geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs)
+        except (RuntimeError, ValueError) as e:
+            raise RobotError(f"{self.name}: cannot read the {kind} meshes of {self.urdf_path}: {e}") from None
+        if self.locked_joints:
+            ids = [full.getJointId(j) for j in self.locked_joints]
+            q = pin.neutral(full)
+            for j, value in self.locked_joints.items():
+                q[full.joints[full.getJointId(j)].idx_q] = value
+            _, geom = pin.buildReducedModel(full, geom, ids, q)
+        for obj in geom.geometryObjects:
+            if obj.parentJoint == 0:
+                obj.placement = self.base_placement * obj.placement
+        return geom
+
+
+def _wrap_into_limits(theta: Array, lower: Array, upper: Array) -> Array:
+    """θ with each value outside [lower, upper] moved by a multiple of 2π inside when possible."""
+    out = theta.copy()
+    for i, (t, lo, hi) in enumerate(zip(theta, lower, upper, strict=True)):
+        if lo <= t <= hi:
+            continue
+        k = np.ceil((lo - t) / (2 * np.pi))
+        if lo <= t + 2 * np.pi * k <= hi:
+            out[i] = t + 2 * np.pi * k
+        else:
+            out[i] = min(max(t, lo), hi)
+    return out
+
+
+def _find_frame(model: pin.Model, name: str, robot: str) -> int:
+    """A frame by name, preferring OP_FRAME, BODY, FIXED_JOINT, JOINT when several share it."""
+    for ftype in (pin.FrameType.OP_FRAME, pin.FrameType.BODY, pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT):
+        if model.existFrame(name, ftype):
+            return int(model.getFrameId(name, ftype))
+    names = sorted({f.name for f in model.frames if f.type != pin.FrameType.JOINT})
+    raise RobotError(f"{robot}: no frame {name!r}; available frames: {', '.join(names)}")
+
+
+def load_robot(source: Problem | RobotSpec | str) -> Robot:
+    """The robot of a problem, a ``[robot]`` spec, or a robot name from :data:`SUPPORTED_ROBOTS`.
+
+    A relative ``urdf`` path is resolved against the problem file (``Problem``) or the working
+    directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file, an
+    unknown frame or an unsupported joint type, listing what is available.
+    """
+    if isinstance(source, Problem):
+        spec = source.robot
+        urdf = source.resolve(spec.urdf) if spec.urdf is not None else None
+    elif isinstance(source, RobotSpec):
+        spec = source
+        urdf = Path(spec.urdf).expanduser().resolve() if spec.urdf is not None else None
+    else:
+        spec = RobotSpec(name=source)
+        urdf = None
+
+    if urdf is not None:
+        if not urdf.is_file():
+            raise RobotError(f"robot.urdf: no file {urdf}")
+        if spec.frame is None:
+            raise RobotError("robot.frame: a user URDF needs the name of its flange frame")
+        info = RobotInfo(str(urdf), None, spec.frame)
+        urdf_path, srdf_path = urdf, None
+        package_dirs = [urdf.parent, *urdf.parents[:3]]
+    else:
+        if spec.name not in ROBOTS:
+            raise RobotError(
+                f"unknown robot {spec.name!r}; supported robots: {', '.join(SUPPORTED_ROBOTS)} "
+                "(or set robot.urdf and robot.frame)"
+            )
+        info = ROBOTS[spec.name]
+        share = example_robot_data_dir()
+        robots = share / "example-robot-data" / "robots"
+        urdf_path = robots / info.urdf
+        srdf_path = robots / info.srdf if info.srdf else None
+        package_dirs = [share]
+
+    try:
+        full = pin.buildModelFromUrdf(str(urdf_path))
+    except (RuntimeError, ValueError) as e:
+        raise RobotError(f"{spec.name}: cannot read {urdf_path}: {e}") from None
+
+    # Reference configuration (full model), then lock the hand joints at 0.
+    q_full = pin.neutral(full)
+    if srdf_path is not None and info.reference is not None:
+        pin.loadReferenceConfigurations(full, str(srdf_path))
+        states = {e.key(): np.array(e.data()) for e in full.referenceConfigurations}
+        if info.reference not in states:
+            raise RobotError(f"{spec.name}: no reference configuration {info.reference!r} in {srdf_path}")
+        q_full = states[info.reference]
+    missing = [j for j in info.locked_joints if not full.existJointName(j)]
+    if missing:
+        raise RobotError(f"{spec.name}: no joint {missing[0]!r} to lock in {urdf_path}")
+    locked = dict.fromkeys(info.locked_joints, 0.0)
+    for j in locked:
+        q_full[full.joints[full.getJointId(j)].idx_q] = 0.0
+    model = (
+        pin.buildReducedModel(full, [full.getJointId(j) for j in locked], q_full) if locked else full.copy()
+    )
+    bad = [
+        f"{model.names[j.id]} ({j.shortname()})"
+        for j in model.joints[1:]
+        if j.shortname() not in _REVOLUTE | _PRISMATIC | _CONTINUOUS
+    ]
+    if bad:
+        raise RobotError(
+            f"{spec.name}: unsupported joint types {', '.join(bad)}; optlight handles revolute, "
+            "continuous and prismatic joints"
+        )
+
+    # Base placement: pre-multiply everything attached to the universe by T_WB.
+    base = placement(spec.base_position_m, spec.base_rpy_deg)
+    for jid in range(1, model.njoints):
+        if model.parents[jid] == 0:
+            model.jointPlacements[jid] = base * model.jointPlacements[jid]
+    for f in range(1, model.nframes):
+        if model.frames[f].parentJoint == 0:
+            model.frames[f].placement = base * model.frames[f].placement
+
+    # Flange (tool frame with +z out of the tool) and light frames.
+    frame_name = spec.frame if spec.frame is not None else info.tool_frame
+    tool = model.frames[_find_frame(model, frame_name, spec.name)]
+    for taken in ("flange", "light"):
+        if model.existFrame(taken):
+            raise RobotError(
+                f"{spec.name}: the URDF already has a frame named {taken!r}, which optlight adds"
+            )
+    fix = placement((0, 0, 0), info.tool_rpy_deg if spec.frame is None else (0, 0, 0))
+    flange_id = model.addFrame(
+        pin.Frame(
+            "flange",
+            tool.parentJoint,
+            _find_frame(model, frame_name, spec.name),
+            tool.placement * fix,
+            pin.FrameType.OP_FRAME,
+        )
+    )
+    offset = placement(spec.light_offset_m, spec.light_rpy_deg)
+    model.addFrame(
+        pin.Frame(
+            "light",
+            tool.parentJoint,
+            flange_id,
+            model.frames[flange_id].placement * offset,
+            pin.FrameType.OP_FRAME,
+        )
+    )
+
+    # θ_ref: the SRDF state (reduced), the catalogue's default, or (user URDF) the limits' middle.
+    theta_ref: Array | None = None
+    if info.reference is not None:
+        q_red = np.concatenate(
+            [q_full[j.idx_q : j.idx_q + j.nq] for j in full.joints[1:] if full.names[j.id] not in locked]
+        )
+        theta_ref = JointCoordinates(model).from_pin(q_red)
+    elif info.theta_ref is not None:
+        theta_ref = np.asarray(info.theta_ref, float)
+        if theta_ref.shape != (model.nv,):
+            raise RobotError(f"{spec.name}: reference has {theta_ref.size} values for {model.nv} joints")
+    accel = spec.acceleration_limit if spec.acceleration_limit is not None else info.acceleration_limit
+    accel_arr = np.asarray(accel, float)
+    if accel_arr.ndim and accel_arr.shape != (model.nv,):
+        raise RobotError(f"{spec.name}: {accel_arr.size} acceleration limits for {model.nv} joints")
+    return Robot(
+        spec.name,
+        model,
+        theta_ref=theta_ref,
+        acceleration_limit=accel_arr,
+        base_placement=base,
+        urdf_path=urdf_path,
+        package_dirs=package_dirs,
+        locked_joints=locked,
+    )

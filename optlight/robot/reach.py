@@ -1,0 +1,161 @@
+"""Reachability map of the light cap: where on the sphere the robot can put the light.
+
+Over a zenith × azimuth grid of the allowed cap (zenith_min … zenith_max, all azimuths), the 5-D
+generalized IK (position + optical axis through O) is solved for the problem's robot and base
+placement, warm-started from the neighbouring cell (previous azimuth of the same zenith ring, else
+the same azimuth one ring in), and the manipulability w = sqrt(det(J Jᵀ)) of the light Jacobian is
+recorded where it succeeds. Collisions are not checked here.
+
+The polar plot is the cap as seen from the camera: azimuth 0 along x_S (image right), 90° along y_S
+(image up), radius = zenith.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+
+from optlight.geometry import LightSphere
+from optlight.robot.ik import generalized_ik, ik_settings
+from optlight.robot.loading import Robot, load_robot
+from optlight.robot.tasks import KinematicState, manipulability
+from optlight.spec import Problem
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ReachabilityMap:
+    """IK over the light cap. Arrays are indexed [zenith, azimuth]; angles in rad.
+
+    ``success`` (Z, A) bool; ``manipulability`` (Z, A), NaN where the IK failed; ``theta`` (Z, A, n)
+    joint angles (NaN where it failed); ``residual`` (Z, A) final |e| in m; ``time_s`` total IK time.
+    """
+
+    robot: str
+    zenith: Array
+    azimuth: Array
+    success: NDArray[np.bool_]
+    manipulability: Array
+    theta: Array
+    residual: Array
+    time_s: float
+
+    @property
+    def reachable_fraction(self) -> float:
+        """Fraction of the grid cells the IK reached."""
+        return float(self.success.mean())
+
+    @property
+    def unreachable(self) -> list[tuple[float, float]]:
+        """(zenith, azimuth) in degrees of every cell the IK did not reach."""
+        zi, ai = np.nonzero(~self.success)
+        return [
+            (float(np.rad2deg(self.zenith[i])), float(np.rad2deg(self.azimuth[j])))
+            for i, j in zip(zi, ai, strict=True)
+        ]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data for ``reachability.json`` (degrees; null where the IK failed)."""
+
+        def nulls(a: Array) -> list[Any]:
+            return [[None if not np.isfinite(x).all() else np.round(x, 6).tolist() for x in row] for row in a]
+
+        return {
+            "robot": self.robot,
+            "zenith_deg": np.rad2deg(self.zenith).round(6).tolist(),
+            "azimuth_deg": np.rad2deg(self.azimuth).round(6).tolist(),
+            "reachable_fraction": self.reachable_fraction,
+            "success": self.success.tolist(),
+            "manipulability": nulls(self.manipulability),
+            "residual_m": self.residual.tolist(),
+            "theta_rad": nulls(self.theta),
+            "time_s": self.time_s,
+        }
+
+    def figure(self) -> Figure:
+        """Polar plot: manipulability per cell (colour), unreachable cells as red crosses."""
+        fig = Figure(figsize=(6.0, 5.2), layout="constrained")
+        ax = fig.add_subplot(projection="polar")
+        z_deg = np.rad2deg(self.zenith)
+        dz = z_deg[1] - z_deg[0] if len(z_deg) > 1 else 1.0
+        da = self.azimuth[1] - self.azimuth[0] if len(self.azimuth) > 1 else 2 * np.pi
+        r_edges = np.clip(np.append(z_deg - dz / 2, z_deg[-1] + dz / 2), 0.0, None)
+        a_edges = np.append(self.azimuth - da / 2, self.azimuth[-1] + da / 2)
+        mesh = ax.pcolormesh(
+            a_edges, r_edges, np.ma.masked_invalid(self.manipulability), cmap="viridis", shading="flat"
+        )
+        fig.colorbar(mesh, ax=ax, label="manipulability  sqrt(det J Jᵀ)", shrink=0.8)
+        zi, ai = np.nonzero(~self.success)
+        if len(zi):
+            ax.plot(self.azimuth[ai], z_deg[zi], "x", color="red", ms=6, label="unreachable")
+            ax.legend(loc="lower left", bbox_to_anchor=(-0.15, -0.12))
+        ax.set_ylim(0.0, r_edges[-1])  # radial limits
+        ax.set_title(
+            f"{self.robot}: light cap reachable in {100 * self.reachable_fraction:.1f} % of cells\n"
+            "(seen from the camera; radius = zenith in degrees)",
+            fontsize=10,
+        )
+        return fig
+
+    def save(self, folder: str | Path) -> tuple[Path, Path]:
+        """Write ``reachability.png`` and ``reachability.json`` into ``folder``; return their paths."""
+        out = Path(folder)
+        out.mkdir(parents=True, exist_ok=True)
+        png, js = out / "reachability.png", out / "reachability.json"
+        self.figure().savefig(png, dpi=120)
+        js.write_text(json.dumps(self.to_dict(), indent=1))
+        return png, js
+
+
+def reachability_map(
+    problem: Problem,
+    zenith_step_deg: float = 5.0,
+    azimuth_step_deg: float = 10.0,
+    *,
+    robot: Robot | None = None,
+) -> ReachabilityMap:
+    """IK success and manipulability over the problem's light cap (see the module docstring).
+
+    Zenith from ``light_sphere.zenith_min_deg`` to ``zenith_max_deg`` (both included) in steps of at
+    most ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``.
+    ``robot`` defaults to ``load_robot(problem)``; IK settings from ``problem.solver``.
+    """
+    robot = robot if robot is not None else load_robot(problem)
+    sphere = LightSphere.from_problem(problem)
+    zmin, zmax = problem.light_sphere.zenith_min_deg, problem.light_sphere.zenith_max_deg
+    n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
+    n_a = int(np.ceil(360.0 / azimuth_step_deg - 1e-9))
+    zenith = np.deg2rad(np.linspace(zmin, zmax, n_z))
+    azimuth = np.deg2rad(np.arange(n_a) * 360.0 / n_a)
+    settings = ik_settings(problem.solver)
+
+    success = np.zeros((n_z, n_a), bool)
+    manip = np.full((n_z, n_a), np.nan)
+    theta = np.full((n_z, n_a, robot.n), np.nan)
+    residual = np.full((n_z, n_a), np.nan)
+    t0 = time.perf_counter()
+    for i, zen in enumerate(zenith):
+        for j, azi in enumerate(azimuth):
+            if j > 0 and success[i, j - 1]:
+                start = theta[i, j - 1]
+            elif i > 0 and success[i - 1, j]:
+                start = theta[i - 1, j]
+            else:
+                start = robot.theta_ref
+            res = generalized_ik(robot, sphere, (zen, azi), start, **settings)
+            residual[i, j] = res.residual
+            if res.success:
+                success[i, j] = True
+                theta[i, j] = res.theta
+                manip[i, j] = manipulability(KinematicState.compute(robot, res.theta).jacobian)
+    return ReachabilityMap(
+        robot.name, zenith, azimuth, success, manip, theta, residual, time.perf_counter() - t0
+    )

@@ -1,0 +1,271 @@
+"""IK tasks: primary light tasks (error, Jacobian) and secondary objectives H(θ) (gradient).
+
+Everything works from one :class:`KinematicState` (pinocchio's forward kinematics and frame Jacobian
+of the light at θ, computed once per iteration), in the style of pink's ``Configuration``.
+
+Primary tasks give an error e (what is left to close) and a Jacobian J with J δθ ≈ e to first order:
+
+- :class:`LightPointingTask` (5-D): light position a_L on the target a* (3 rows, m) and optical axis
+  z_L through the sphere centre O (2 rows); the roll about z_L is free.
+- :class:`LightPoseTask` (6-D): position and full orientation R* (3 + 3 rows).
+
+Orientation rows are rotation vectors (rad) in the light frame, multiplied by a length w (default: the
+sphere radius b), so they read as metres: w·angle is how far the optical axis misses O.
+
+Secondary objectives H(θ) are minimised in the null space of the primary task (γ = −k ∇H):
+:class:`JointLimitTask`, :class:`ManipulabilityTask`, :class:`PostureTask`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.errors import UnreachableError
+from optlight.geometry import LightSphere
+
+if TYPE_CHECKING:
+    from optlight.robot.loading import Robot
+
+Array = NDArray[np.float64]
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+@dataclass(frozen=True)
+class KinematicState:
+    """Light pose and Jacobian at θ: a_L (3,) m, R_WL (3, 3), J (6, n) LOCAL_WORLD_ALIGNED.
+
+    Holding one means the kinematics is up to date (built by :meth:`compute`).
+    """
+
+    theta: Array
+    position: Array
+    rotation: Array
+    jacobian: Array
+
+    @classmethod
+    def compute(cls, robot: Robot, theta: Array) -> KinematicState:
+        """Forward kinematics and the light Jacobian at θ (one pinocchio pass)."""
+        q = theta if robot.angles_are_q else robot.to_pin(theta)
+        pin.computeJointJacobians(robot.model, robot.data, q)
+        m = pin.updateFramePlacement(robot.model, robot.data, robot.light_frame_id)
+        jac = pin.getFrameJacobian(robot.model, robot.data, robot.light_frame_id, _LWA)
+        return cls(theta, m.translation, m.rotation, jac)
+
+
+class PrimaryTask(Protocol):
+    """A task the IK drives to zero: ``error_and_jacobian(state) -> (e (m,), J (m, n))``."""
+
+    dim: int
+
+    def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]: ...
+
+
+def _target_position(sphere: LightSphere, target: ArrayLike, tol: float = 1e-6) -> Array:
+    """a* from a light position (3,) on the sphere or from (zenith, azimuth) in rad."""
+    t = np.asarray(target, float)
+    if t.shape == (2,):
+        return np.asarray(sphere.position(t[0], t[1]), float)
+    if t.shape != (3,):
+        raise UnreachableError(f"IK target must be a position (3,) or (zenith, azimuth), got shape {t.shape}")
+    off = abs(float(np.linalg.norm(t - sphere.center)) - sphere.radius)
+    if off > tol:
+        raise UnreachableError(
+            f"IK target {t.round(4).tolist()} is {off:.2e} m off the light sphere "
+            f"(centre {sphere.center.round(4).tolist()}, radius {sphere.radius:g} m)"
+        )
+    return t
+
+
+class LightPointingTask:
+    """5-D task: a_L = a* and z_L ∥ d* = (O − a*)/b, roll free.
+
+    e = [a* − a_L ; w·(φ_x, φ_y)], where φ = angle·axis is the rotation vector (light frame) that turns
+    z_L onto d*: with d_L = R_WLᵀ d*, φ = atan2(|(d_x, d_y)|, d_z) · (−d_y, d_x)/|(d_x, d_y)|.
+    J = [J_v ; w·(R_WLᵀ J_ω)_{x,y}]. φ has no spurious zero at z_L = −d* (angle π), unlike z_L × d*.
+    """
+
+    dim = 5
+
+    def __init__(self, sphere: LightSphere, target: ArrayLike, *, orientation_weight: float | None = None):
+        self.sphere = sphere
+        self.target = _target_position(sphere, target)
+        axis = sphere.center - self.target
+        self.axis = axis / np.linalg.norm(axis)
+        self.weight = float(sphere.radius if orientation_weight is None else orientation_weight)
+
+    def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
+        """(e (5,), J (5, n)) at ``state``: position error in m, pointing error in weighted rad."""
+        r, jac = state.rotation, state.jacobian
+        dx, dy, dz = self.axis @ r
+        s = math.hypot(dx, dy)
+        k = self.weight * (math.atan2(s, dz) / s if s > 1e-12 else 1.0)
+        p = self.target - state.position
+        e = np.array([p[0], p[1], p[2], -k * dy, k * dx])
+        j = np.empty((5, jac.shape[1]))
+        j[:3] = jac[:3]
+        j[3:] = self.weight * (r[:, :2].T @ jac[3:])
+        return e, j
+
+
+class LightPoseTask:
+    """6-D task: a_L = a*, R_WL = R* (roll fixed). e = [a* − a_L ; w·log3(R_WLᵀ R*)],
+    J = [J_v ; w·R_WLᵀ J_ω] (the Jacobian of log3 is taken as identity: Gauss–Newton, exact at e = 0).
+
+    R* must point its z axis at O; by default it is ``aim_rotation(a*, O, x_S)`` (the roll that keeps
+    x_L along the sphere's x axis), see :func:`optlight.geometry.aim_rotation`.
+    """
+
+    dim = 6
+
+    def __init__(
+        self,
+        sphere: LightSphere,
+        target: ArrayLike,
+        rotation: ArrayLike | None = None,
+        *,
+        orientation_weight: float | None = None,
+    ) -> None:
+        from optlight.geometry import aim_rotation
+
+        self.sphere = sphere
+        self.target = _target_position(sphere, target)
+        axis = (sphere.center - self.target) / np.linalg.norm(sphere.center - self.target)
+        if rotation is None:
+            reference = sphere.rotation[:, 0]
+            if abs(reference @ axis) > 0.99:
+                reference = sphere.rotation[:, 1]
+            self.rotation = aim_rotation(self.target, sphere.center, reference)
+        else:
+            self.rotation = np.asarray(rotation, float)
+            miss = float(np.linalg.norm(self.rotation[:, 2] - axis))
+            if miss > 1e-6:
+                raise UnreachableError(
+                    f"IK target rotation: its z axis misses the sphere centre by {miss:.2e}"
+                )
+        self.weight = float(sphere.radius if orientation_weight is None else orientation_weight)
+
+    def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
+        """(e (6,), J (6, n)) at ``state``."""
+        r, jac = state.rotation, state.jacobian
+        e = np.empty(6)
+        e[:3] = self.target - state.position
+        e[3:] = self.weight * pin.log3(r.T @ self.rotation)
+        j = np.empty((6, jac.shape[1]))
+        j[:3] = jac[:3]
+        j[3:] = self.weight * (r.T @ jac[3:])
+        return e, j
+
+
+# ------------------------------------------------------------------------------------------------
+# Secondary objectives
+# ------------------------------------------------------------------------------------------------
+
+
+class SecondaryTask(Protocol):
+    """An objective H(θ) minimised in the null space: ``value`` and ``gradient`` (n,), gain ``weight``."""
+
+    name: str
+    weight: float
+
+    def value(self, robot: Robot, state: KinematicState) -> float: ...
+
+    def gradient(self, robot: Robot, state: KinematicState) -> Array: ...
+
+
+class JointLimitTask:
+    """Joint-limit avoidance (Liégeois): H = ½ Σ_i ((θ_i − c_i)/(u_i − l_i))², c = (l + u)/2.
+
+    ∇H_i = (θ_i − c_i)/(u_i − l_i)²: moves every joint towards the middle of its range, in
+    proportion to how far out it is relative to the range (dimensionless H).
+    """
+
+    name = "joint_limits"
+
+    def __init__(self, weight: float = 1.0) -> None:
+        self.weight = float(weight)
+
+    def value(self, robot: Robot, state: KinematicState) -> float:
+        """H(θ) (dimensionless)."""
+        x = (state.theta - 0.5 * (robot.lower + robot.upper)) / (robot.upper - robot.lower)
+        return 0.5 * float(x @ x)
+
+    def gradient(self, robot: Robot, state: KinematicState) -> Array:
+        """∇H (n,), 1/rad."""
+        span = robot.upper - robot.lower
+        return (state.theta - 0.5 * (robot.lower + robot.upper)) / (span * span)
+
+
+class PostureTask:
+    """Posture: H = ½ |θ − θ_ref|², ∇H = θ − θ_ref (rad). θ_ref defaults to the robot's."""
+
+    name = "posture"
+
+    def __init__(self, weight: float = 1.0, theta_ref: ArrayLike | None = None) -> None:
+        self.weight = float(weight)
+        self.theta_ref = None if theta_ref is None else np.asarray(theta_ref, float)
+
+    def _ref(self, robot: Robot) -> Array:
+        return robot.theta_ref if self.theta_ref is None else self.theta_ref
+
+    def value(self, robot: Robot, state: KinematicState) -> float:
+        """H(θ) in rad²."""
+        d = state.theta - self._ref(robot)
+        return 0.5 * float(d @ d)
+
+    def gradient(self, robot: Robot, state: KinematicState) -> Array:
+        """∇H (n,), rad."""
+        return state.theta - self._ref(robot)
+
+
+def manipulability(jacobian: Array) -> float:
+    """Yoshikawa's manipulability w = sqrt(det(J Jᵀ)) of a (6, n) Jacobian (0 at singularities)."""
+    return math.sqrt(max(float(np.linalg.det(jacobian @ jacobian.T)), 0.0))
+
+
+def _cross(a: NDArray[Any], b: NDArray[Any]) -> Array:
+    """Column-wise cross product of two (3, n) arrays (np.cross is slow on small arrays)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+class ManipulabilityTask:
+    """Manipulability: H = −log w, w = sqrt(det(J Jᵀ)), J the (6, n) LOCAL_WORLD_ALIGNED light Jacobian.
+
+    Analytic gradient for a serial chain with columns (v_j, ω_j): ∂v_j/∂θ_k = ω_k × v_j and
+    ∂ω_j/∂θ_k = ω_k × ω_j for k < j, ∂v_j/∂θ_k = ω_j × v_k and ∂ω_j/∂θ_k = 0 for k ≥ j. With
+    M = (J Jᵀ)⁻¹ J, ∂ log w/∂θ_k = ⟨∂J/∂θ_k, M⟩ = ω_k · Σ_{j>k} (v_j × M_v,j + ω_j × M_ω,j)
+    + v_k · Σ_{j≤k} (M_v,j × ω_j), O(n). H is scale-free; it grows without bound at singularities.
+    """
+
+    name = "manipulability"
+
+    def __init__(self, weight: float = 1.0) -> None:
+        self.weight = float(weight)
+
+    def value(self, robot: Robot, state: KinematicState) -> float:
+        """H(θ) = −log w."""
+        return -math.log(max(manipulability(state.jacobian), 1e-300))
+
+    def gradient(self, robot: Robot, state: KinematicState) -> Array:
+        """∇H = −∇ log w (n,), 1/rad."""
+        jac = state.jacobian
+        m = np.linalg.solve(jac @ jac.T, jac)
+        v, w = jac[:3], jac[3:]
+        a = _cross(v, m[:3]) + _cross(w, m[3:])
+        b = _cross(m[:3], w)
+        after = np.cumsum(a[:, ::-1], axis=1)[:, ::-1] - a  # Σ_{j>k} A_j
+        upto = np.cumsum(b, axis=1)  # Σ_{j≤k} B_j
+        return -(np.einsum("ik,ik->k", w, after) + np.einsum("ik,ik->k", v, upto))
+
+
+SECONDARY_TASKS: dict[str, type[JointLimitTask] | type[PostureTask] | type[ManipulabilityTask]] = {
+    "joint_limits": JointLimitTask,
+    "posture": PostureTask,
+    "manipulability": ManipulabilityTask,
+}
