@@ -26,7 +26,9 @@ The limits hold at the gridpoints by construction but can be exceeded between th
 per cent on a coarse grid: q' and q'' vary inside an interval). We therefore probe every interval at
 s-fractions 1/8, 2/8, …, 7/8 with the formulas above, halve every interval where a limit is exceeded
 by more than :data:`LIMIT_SLACK` and time the segment again, at most :data:`MAX_REFINEMENTS` times.
-On random paths the dense-resampled excess then stays near 1e-4.
+On random paths the dense-resampled excess then stays near 1e-4. The ``ParametrizeConstAccel``
+trajectory is evaluated vectorised by :class:`_Motion` from TOPPRA's gridpoints and path speeds
+(toppra's own evaluation loops over the times in Python).
 """
 
 from __future__ import annotations
@@ -60,11 +62,14 @@ MERGE_DISTANCE = 1e-9
 #: Largest gap (rad, any joint) allowed between the end of a segment and the start of the next.
 JOINT_TOLERANCE = 1e-9
 
+#: Grid intervals are kept longer than this fraction of the segment's chord length.
+MIN_SPACING_FRACTION = 1e-5
 #: Times (s) closer than this are one instant when sampling (the CSV writes nanoseconds).
 TIME_RESOLUTION = 1e-6
 
 _PROBE_FRACTIONS = np.arange(1, 8) / 8
 
+# toppra logs a warning for every failure we turn into a SolverError, and INFO for every success.
 logging.getLogger("toppra").setLevel(logging.ERROR)
 
 
@@ -468,8 +473,11 @@ def _time_segment(
             grid = np.linspace(0.0, s[-1], gridpoints)
     except ValueError as e:
         raise SolverError(f"segment {index}: toppra could not choose gridpoints ({e})") from e
-    grid = _distinct(np.concatenate([grid, s]), tol=1e-12)
-    grid[-1] = s[-1]
+    # keep every knot (the third derivative of q(s) jumps there); drop grid points crowding a knot:
+    # on a very short interval toppra's own rounding of ṡ² (1e-8) is a large error in s̈ = Δṡ²/2Δs
+    min_spacing = MIN_SPACING_FRACTION * s[-1]
+    nearest = np.min(np.abs(grid[:, None] - s[None, :]), axis=1)
+    grid = np.unique(np.concatenate([grid[nearest > min_spacing], s]))
     constraints = [
         toppra.constraint.JointVelocityConstraint(vmax),
         toppra.constraint.JointAccelerationConstraint(amax),
@@ -494,6 +502,7 @@ def _time_segment(
             )
         excess = _interval_excess(path, grid, np.asarray(data.sd_vec, float) ** 2, vmax, amax)
         bad = excess > LIMIT_SLACK
+        split = bad & (np.diff(grid) > 2 * min_spacing)
         if not bad.any():
             motion = _Motion(path, grid, np.asarray(data.sd_vec, float), output)
             if not np.isclose(motion.duration, float(output.duration), rtol=1e-9, atol=1e-12):
@@ -502,11 +511,13 @@ def _time_segment(
                     f"its re-evaluation {motion.duration} s (toppra changed?)"
                 )
             return motion
-        if attempt < MAX_REFINEMENTS:
-            grid = np.sort(np.concatenate([grid, 0.5 * (grid[:-1] + grid[1:])[bad]]))
+        if attempt == MAX_REFINEMENTS or not split.any():
+            break
+        grid = np.sort(np.concatenate([grid, 0.5 * (grid[:-1] + grid[1:])[split]]))
     raise SolverError(
         f"segment {index}: the timed path exceeds the joint limits by {excess.max():.2%} between gridpoints "
-        f"after {MAX_REFINEMENTS} refinements ({len(grid)} gridpoints); the path is too sharp — add waypoints"
+        f"after {attempt} refinements ({len(grid)} gridpoints); the path is too sharp or too short "
+        f"({s[-1]:.3g} rad) — add waypoints or merge nearly identical landmarks"
     )
 
 
