@@ -213,3 +213,16 @@ def test_toppra_failure_raises_solver_error_naming_the_segment(monkeypatch) -> N
     monkeypatch.setattr(timing.toppra.algorithm.TOPPRA, "compute_trajectory", fail_on_second)
     with pytest.raises(SolverError, match="segment 1: TOPPRA failed"):
         time_parameterize(_segments(LANDMARKS), VMAX, AMAX, 0.1)
+
+
+def test_from_csv_reads_columns_by_name(tmp_path) -> None:
+    path = tmp_path / "interleaved.csv"
+    path.write_text("t,q_a,qd_a,qdd_a,q_b,qd_b,qdd_b\n0,1,2,3,4,5,6\n1,2,3,4,5,6,7\n")
+    traj = Trajectory.from_csv(path)
+    assert traj.joint_names == ("a", "b")
+    q, qd, qdd = traj.sample([0.5])
+    np.testing.assert_allclose(np.hstack([q, qd, qdd]), [[1.5, 4.5, 2.5, 5.5, 3.5, 6.5]])
+    assert traj.capture_times.size == 0
+    path.write_text("t,q_a,qd_b,qdd_a\n0,1,2,3\n1,2,3,4\n")
+    with pytest.raises(ValueError, match="same joints"):
+        Trajectory.from_csv(path)

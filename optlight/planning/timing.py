@@ -331,10 +331,8 @@ class Trajectory:
         t = data[:, 0]
         if t.size < 2 or np.any(np.diff(t) <= 0) or abs(t[0]) > 1e-9:
             raise ValueError(f"{path}: times must start at 0 and increase strictly (at least two rows)")
-        n = len(names)
-        index = {"q": header.index(f"q_{names[0]}")}
-        index["qd"], index["qdd"] = header.index(f"qd_{names[0]}"), header.index(f"qdd_{names[0]}")
-        piece = _Samples(t, *(data[:, index[p] : index[p] + n] for p in ("q", "qd", "qdd")))
+        q, qd, qdd = (data[:, [header.index(f"{p}_{name}") for name in names]] for p in ("q", "qd", "qdd"))
+        piece = _Samples(t, q, qd, qdd)
         if landmark_intervals is None:
             intervals = np.zeros((0, 2))
         else:
