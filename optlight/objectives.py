@@ -62,8 +62,9 @@ CHI2_EPS = 1e-10
 EMD_SMOOTH_ABS = 1e-4
 #: Default level ℓ (normalised luminance) of the saturation and shadow terms.
 DEFAULT_LEVELS = {"saturation": 0.98, "shadow": 0.05}
-#: Largest number of floats a batched NumPy histogram holds at once (S·P·K), to bound memory.
-_BATCH_FLOATS = 4_000_000
+#: Largest number of floats (S·P·K) a batched NumPy histogram works on at once: ~2 MB, so the chunk
+#: stays in cache (larger chunks measured up to 4× slower per sample).
+_BATCH_FLOATS = 250_000
 
 
 # --------------------------------------------------------------------------------------------
@@ -287,7 +288,7 @@ def read_image(path: Path, saturation: float, file: str = "<api>", key: str = ""
     """A greyscale image as normalised luminance (H, W).
 
     PNG (or anything Pillow reads): integer values over their full scale (8-bit /255, 16-bit
-    /65535), colour converted to luma 0.2126 R + 0.7152 G + 0.0722 B. NPY: pixel values in the
+    /65535), 32-bit float as is, colour converted to luma 0.2126 R + 0.7152 G + 0.0722 B. NPY: pixel values in the
     renderer's units (as :meth:`Scene.render` returns them), divided by ``saturation``; a trailing
     axis of 3 or 4 channels is converted to luma likewise. Errors name ``file`` and ``key``."""
     expected = "a greyscale or RGB image, PNG or NPY"
@@ -306,19 +307,18 @@ def read_image(path: Path, saturation: float, file: str = "<api>", key: str = ""
 
 
 def _read_png(path: Path) -> Array:
+    """16-bit greyscale /65535, 8-bit greyscale or RGB(A) /255, 32-bit float as is; any other mode
+    (bilevel, palette, …) through Pillow's conversion to 8-bit greyscale."""
     from PIL import Image
 
     with Image.open(path) as im:
-        mode = im.mode
-        a = np.asarray(im)
-    if mode in ("I;16", "I;16B", "I;16L", "I"):
-        return a.astype(float) / 65535.0
-    if mode in ("L", "RGB", "RGBA", "LA"):
-        a = a.astype(float) / 255.0
-        return a[..., 0] if mode == "LA" else a
-    if mode == "F":
-        return a.astype(float)
-    raise ValueError(f"unsupported image mode {mode}")
+        if im.mode in ("I;16", "I;16B", "I;16L", "I"):
+            return np.asarray(im).astype(float) / 65535.0
+        if im.mode == "F":
+            return np.asarray(im).astype(float)
+        if im.mode in ("RGB", "RGBA"):
+            return np.asarray(im).astype(float) / 255.0
+        return np.asarray(im.convert("L")).astype(float) / 255.0
 
 
 def resize_image(img: Array, width: int, height: int, nearest: bool = False) -> Array:

@@ -159,9 +159,11 @@ def test_read_image_png_npy_and_errors(tmp_path: Path) -> None:
     Image.fromarray(np.round(values * 65535).astype(np.uint16)).save(tmp_path / "a16.png")
     Image.fromarray(np.round(values * 255).astype(np.uint8)).save(tmp_path / "a8.png")
     np.save(tmp_path / "a.npy", 2.0 * values)
+    Image.fromarray(values > 0.5).save(tmp_path / "bilevel.png")
     np.testing.assert_allclose(read_image(tmp_path / "a16.png", 1.0), values, atol=1e-5)
     np.testing.assert_allclose(read_image(tmp_path / "a8.png", 1.0), values, atol=3e-3)
     np.testing.assert_allclose(read_image(tmp_path / "a.npy", 2.0), values)
+    np.testing.assert_array_equal(read_image(tmp_path / "bilevel.png", 1.0), values > 0.5)
     (tmp_path / "bad.png").write_text("not an image")
     with pytest.raises(ProblemError, match="objective.reference.image"):
         read_image(tmp_path / "bad.png", 1.0, "p.toml", "objective.reference.image")
