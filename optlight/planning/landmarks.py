@@ -371,7 +371,8 @@ class _Search:
             first_status = first_status or result.status
             if not result.success:
                 break
-            zenith = float(result.x[0])
+            # IPOPT may leave a bound by its relaxation (~1e-8): clip back onto the allowed range.
+            zenith = float(np.clip(result.x[0], self.sphere.zenith_min, self.sphere.zenith_max))
             if result.x.size == 2:
                 azimuth = float(result.x[1])
             position = self.sphere.position(zenith, azimuth)
