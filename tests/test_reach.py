@@ -1,0 +1,59 @@
+"""Reachability map of the light cap."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from optlight.geometry import LightSphere
+from optlight.robot import load_robot, reachability_map
+from optlight.spec import load_problem, problem_from_dict
+
+
+def test_default_problem_cap_is_fully_reachable_by_the_panda(tmp_path: Path) -> None:
+    problem = load_problem("default")
+    reach = reachability_map(problem, zenith_step_deg=10.0, azimuth_step_deg=30.0)
+    assert reach.zenith.shape == (7,) and reach.azimuth.shape == (12,)
+    assert np.isclose(np.rad2deg(reach.zenith[-1]), problem.light_sphere.zenith_max_deg)
+    assert reach.success.all() and reach.reachable_fraction == 1.0 and reach.unreachable == []
+    assert np.all(reach.manipulability > 0)
+    robot = load_robot(problem)
+    sphere = LightSphere.from_problem(problem)
+    for i, j in [(0, 0), (3, 5), (6, 11)]:
+        theta = reach.theta[i, j]
+        assert robot.within_limits(theta, tol=0.0)
+        zenith, azimuth = sphere.angles(robot.light_pose(theta)[0])
+        assert np.isclose(zenith, reach.zenith[i], atol=1e-4)
+        if i > 0:
+            assert np.isclose(azimuth, reach.azimuth[j], atol=1e-4)
+
+    png, js = reach.save(tmp_path / "out")
+    assert png.name == "reachability.png" and png.stat().st_size > 10_000
+    data = json.loads(js.read_text())
+    assert data["robot"] == "panda" and data["reachable_fraction"] == 1.0
+    assert np.allclose(data["zenith_deg"], np.arange(0, 61, 10))
+    assert (
+        len(data["theta_rad"]) == 7 and len(data["theta_rad"][0]) == 12 and len(data["theta_rad"][0][0]) == 7
+    )
+
+
+def test_unreachable_cells_are_reported(tmp_path: Path) -> None:
+    """An object 1.2 m from the base: the near side of the cap is within reach, the far side is not."""
+    problem = problem_from_dict(
+        {
+            "object": {"center_m": [1.2, 0.0, 0.5]},
+            "camera": {"position_m": [0.4, 0.0, 0.5]},
+            "solver": {"ik_max_iter": 60},
+        }
+    )
+    reach = reachability_map(problem, zenith_step_deg=30.0, azimuth_step_deg=60.0)
+    assert 0.0 < reach.reachable_fraction < 1.0
+    failed = ~reach.success
+    assert np.isnan(reach.manipulability[failed]).all() and np.isnan(reach.theta[failed]).all()
+    assert len(reach.unreachable) == failed.sum()
+    _, js = reach.save(tmp_path)
+    data = json.loads(js.read_text())
+    i, j = np.argwhere(failed)[0]
+    assert data["theta_rad"][i][j] is None and data["manipulability"][i][j] is None

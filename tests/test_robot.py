@@ -1,0 +1,225 @@
+"""Robots by name, joint-angle coordinates, the CasADi kinematics against pinocchio, h(θ)."""
+
+from __future__ import annotations
+
+import functools
+import shutil
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from optlight.errors import RobotError
+from optlight.geometry import LightSphere, sphere_frame
+from optlight.robot import SUPPORTED_ROBOTS, Robot, light_angles, light_residual, load_robot
+from optlight.robot.loading import ROBOTS, example_robot_data_dir, placement
+from optlight.spec import RobotSpec, load_problem, problem_from_dict
+
+N_CONFIGS = 200
+
+
+@functools.cache
+def robot(name: str) -> Robot:
+    return load_robot(name)
+
+
+def configurations(r: Robot, n: int = N_CONFIGS, seed: int = 0) -> np.ndarray:
+    return r.random_configuration(np.random.default_rng(seed), n)
+
+
+def pin_poses(r: Robot, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    out = [r.light_pose(t) for t in thetas]
+    return np.array([p for p, _ in out]), np.array([rot for _, rot in out])
+
+
+@pytest.mark.parametrize("name", SUPPORTED_ROBOTS)
+def test_casadi_kinematics_equals_pinocchio(name: str) -> None:
+    r = robot(name)
+    thetas = configurations(r)
+    p_pin, r_pin = pin_poses(r, thetas)
+    p_ca, r_ca = r.symbolic_light_pose.map(N_CONFIGS)(thetas.T)
+    p_ca = np.array(p_ca).T
+    r_ca = np.array(r_ca).reshape(3, N_CONFIGS, 3).transpose(1, 0, 2)  # [R_1 … R_N] side by side
+    assert np.abs(p_ca - p_pin).max() < 1e-10
+    assert np.abs(r_ca - r_pin).max() < 1e-10
+
+
+@pytest.mark.parametrize("name", SUPPORTED_ROBOTS)
+def test_casadi_jacobian_equals_pinocchio_frame_jacobian(name: str) -> None:
+    """d a_L/dθ = J_v and d(R e_i)/dθ = J_ω × (R e_i) for the axes x_L and z_L (LOCAL_WORLD_ALIGNED)."""
+    r = robot(name)
+    theta = ca.SX.sym("theta", r.n)
+    p, rot = r.symbolic_light_pose(theta)
+    jac = ca.Function(
+        "light_axes_jacobian",
+        [theta],
+        [ca.jacobian(p, theta), ca.jacobian(rot[:, 0], theta), ca.jacobian(rot[:, 2], theta)],
+    )
+    for t in configurations(r, 50, seed=1):
+        jp, jx, jz = (np.array(m) for m in jac(t))
+        j = r.light_jacobian(t)
+        _, rot_pin = r.light_pose(t)
+        assert np.abs(jp - j[:3]).max() < 1e-10
+        assert np.abs(jx - np.cross(j[3:].T, rot_pin[:, 0]).T).max() < 1e-10
+        assert np.abs(jz - np.cross(j[3:].T, rot_pin[:, 2]).T).max() < 1e-10
+
+
+@pytest.mark.parametrize("name", SUPPORTED_ROBOTS)
+def test_robot_attributes_are_consistent(name: str) -> None:
+    r = robot(name)
+    n = r.n
+    assert len(r.joint_names) == n and r.model.nv == n
+    for arr in (r.lower, r.upper, r.velocity_limit, r.acceleration_limit, r.theta_ref):
+        assert arr.shape == (n,)
+    assert np.all(r.lower < r.upper)
+    assert np.all(r.velocity_limit > 0) and np.all(r.acceleration_limit > 0)
+    assert r.within_limits(r.theta_ref)
+    assert r.model.frames[r.light_frame_id].name == "light"
+    assert r.light_jacobian(r.theta_ref).shape == (6, n)
+    thetas = configurations(r, 20)
+    back = r.from_pin(r.to_pin(thetas))
+    assert np.allclose(np.cos(back), np.cos(thetas)) and np.allclose(np.sin(back), np.sin(thetas))
+    assert np.allclose(r.to_pin(back), r.to_pin(thetas))
+
+
+def test_continuous_joints_are_cos_sin_with_two_turn_limits() -> None:
+    r = robot("kinova")
+    assert r.model.nq == 9 and r.n == 6
+    continuous = [i for i, k in enumerate(r.joint_kinds) if k.startswith("JointModelRUB")]
+    assert continuous == [0, 3, 5]
+    assert np.allclose(r.lower[continuous], -2 * np.pi) and np.allclose(r.upper[continuous], 2 * np.pi)
+    theta = np.array([2.5, 2.0, 3.0, -3.0, 3.0, 0.3])
+    q = r.to_pin(theta)
+    j1 = r.model.joints[r.model.getJointId(r.joint_names[0])]
+    assert np.allclose(q[j1.idx_q : j1.idx_q + 2], [np.cos(2.5), np.sin(2.5)])
+    assert np.allclose(r.from_pin(q), theta)
+    # θ and θ + 2π are the same pose for a continuous joint
+    shifted = theta + np.array([2 * np.pi, 0, 0, 0, 0, 0])
+    assert np.allclose(r.light_pose(shifted)[0], r.light_pose(theta)[0])
+
+
+def test_panda_fingers_are_locked_and_reference_is_the_srdf_default() -> None:
+    r = robot("panda")
+    assert r.n == 7 and "panda_finger_joint1" not in r.joint_names
+    assert np.allclose(r.theta_ref, [0, -0.785398, 0, -2.35619, 0, 1.5707, 0.785398])
+    assert np.allclose(r.acceleration_limit, ROBOTS["panda"].acceleration_limit)
+
+
+def test_flange_z_points_out_of_the_tool() -> None:
+    """kinova and z1 tool frames have +x out of the tool: their flange is turned so +z is."""
+    for name in ("kinova", "z1"):
+        r = robot(name)
+        tool = r.model.frames[r.model.frames[r.flange_frame_id].parentFrame].name
+        for t in configurations(r, 5):
+            assert np.allclose(r.frame_pose("flange", t).rotation[:, 2], r.frame_pose(tool, t).rotation[:, 0])
+    r = robot("panda")
+    t = r.theta_ref
+    assert np.allclose(r.frame_pose("flange", t).homogeneous, r.frame_pose("panda_hand_tcp", t).homogeneous)
+
+
+def test_base_placement_moves_everything_consistently() -> None:
+    base = RobotSpec(name="panda", base_position_m=(0.3, -0.2, 0.1), base_rpy_deg=(5.0, -10.0, 30.0))
+    moved, ref = load_robot(base), robot("panda")
+    t_wb = placement(base.base_position_m, base.base_rpy_deg)
+    for t in configurations(ref, 10):
+        expect = t_wb * ref.frame_pose("light", t)
+        p, rot = moved.light_pose(t)
+        assert np.allclose(p, expect.translation) and np.allclose(rot, expect.rotation)
+        p_ca, r_ca = moved.symbolic_light_pose(t)
+        assert np.allclose(np.array(p_ca).ravel(), p) and np.allclose(np.array(r_ca), rot)
+        assert np.allclose(moved.frame_pose("panda_link0", t).homogeneous, t_wb.homogeneous)
+        jac_ref, jac = ref.light_jacobian(t), moved.light_jacobian(t)
+        assert np.allclose(jac[:3], t_wb.rotation @ jac_ref[:3]) and np.allclose(
+            jac[3:], t_wb.rotation @ jac_ref[3:]
+        )
+    geom = moved.geometry_model("collision")
+    data = moved.model.createData()
+    gdata = geom.createData()
+    pin.framesForwardKinematics(moved.model, data, moved.to_pin(moved.theta_ref))
+    pin.updateGeometryPlacements(moved.model, data, geom, gdata)
+    link0 = next(i for i, g in enumerate(geom.geometryObjects) if g.name.startswith("panda_link0"))
+    assert np.allclose(gdata.oMg[link0].translation, t_wb.translation, atol=0.1)
+
+
+def test_light_offset_and_rotation_relative_to_the_flange() -> None:
+    spec = RobotSpec(name="ur5", light_offset_m=(0.01, -0.02, 0.05), light_rpy_deg=(0.0, 20.0, 45.0))
+    r, ref = load_robot(spec), robot("ur5")
+    offset = placement(spec.light_offset_m, spec.light_rpy_deg)
+    for t in configurations(r, 10):
+        expect = ref.frame_pose("tool0", t) * offset
+        p, rot = r.light_pose(t)
+        assert np.allclose(p, expect.translation) and np.allclose(rot, expect.rotation)
+        p_ca, _ = r.symbolic_light_pose(t)
+        assert np.allclose(np.array(p_ca).ravel(), p)
+
+
+def test_unknown_robot_lists_the_supported_ones() -> None:
+    with pytest.raises(RobotError) as err:
+        load_robot("r2d2")
+    for name in SUPPORTED_ROBOTS:
+        assert name in str(err.value)
+
+
+def test_unknown_frame_lists_the_frames() -> None:
+    with pytest.raises(RobotError) as err:
+        load_robot(RobotSpec(name="panda", frame="nose"))
+    assert (
+        "'nose'" in str(err.value) and "panda_hand_tcp" in str(err.value) and "panda_link8" in str(err.value)
+    )
+
+
+def test_user_urdf_relative_to_the_problem_file(tmp_path: Path) -> None:
+    source = (
+        example_robot_data_dir()
+        / "example-robot-data"
+        / "robots"
+        / "ur_description"
+        / "urdf"
+        / "ur5_robot.urdf"
+    )
+    (tmp_path / "arms").mkdir()
+    shutil.copy(source, tmp_path / "arms" / "my_ur5.urdf")
+    problem_file = tmp_path / "cell.toml"
+    problem_file.write_text('[robot]\nname = "my arm"\nurdf = "arms/my_ur5.urdf"\nframe = "tool0"\n')
+    r = load_robot(load_problem(problem_file))
+    assert r.name == "my arm" and r.n == 6
+    assert np.allclose(r.theta_ref, 0.5 * (r.lower + r.upper))
+    for t in configurations(r, 5):
+        assert np.allclose(r.light_pose(t)[0], robot("ur5").light_pose(t)[0])
+    with pytest.raises(RobotError, match="frame"):
+        load_robot(RobotSpec(urdf=str(source)))
+
+
+def test_light_residual_numeric_and_symbolic() -> None:
+    r = robot("xarm7")
+    rng = np.random.default_rng(3)
+    t_true = r.random_configuration(rng)
+    p, rot = r.light_pose(t_true)
+    centre = p + 0.4 * rot[:, 2]
+    sphere = LightSphere(centre, 0.4, sphere_frame(centre, centre + np.array([0.0, -1.0, 0.0])))
+    assert np.abs(light_residual(r, sphere, t_true)).max() < 1e-12
+    # aimed at O but 0.1 m too far away: h = (0, 0, 0.1); aimed 90° off: h_z = −b
+    farther = LightSphere(p + 0.5 * rot[:, 2], 0.4, sphere.rotation)
+    assert np.allclose(light_residual(r, farther, t_true), [0.0, 0.0, 0.1])
+    beside = LightSphere(p + 0.4 * rot[:, 0], 0.4, sphere.rotation)
+    assert np.allclose(light_residual(r, beside, t_true), [0.4, 0.0, -0.4])
+    theta = ca.SX.sym("theta", r.n)
+    h_fun = ca.Function("h", [theta], [light_residual(r, sphere, theta)])
+    theta_mx = ca.MX.sym("theta", r.n)
+    h_mx = ca.Function("h", [theta_mx], [light_residual(r, sphere, theta_mx)])
+    for t in configurations(r, 20, seed=4):
+        h = light_residual(r, sphere, t)
+        assert h.shape == (3,)
+        assert np.allclose(np.array(h_fun(t)).ravel(), h, atol=1e-12)
+        assert np.allclose(np.array(h_mx(t)).ravel(), h, atol=1e-12)
+
+
+def test_light_angles_follow_the_sphere_convention() -> None:
+    problem = problem_from_dict({})
+    r = load_robot(problem)
+    sphere = LightSphere.from_problem(problem)
+    zenith, azimuth = light_angles(r, sphere, r.theta_ref)
+    z_ref, a_ref = sphere.angles(r.light_pose(r.theta_ref)[0])
+    assert np.isclose(zenith, z_ref) and np.isclose(azimuth, a_ref)
