@@ -457,6 +457,10 @@ class Objective:
             cost = cost + w * t.casadi(u)
         return cost
 
+    def __call__(self, pixels: ca.MX) -> ca.MX:
+        """``objective(I)``: the same as :meth:`casadi`, for composing into other NLPs."""
+        return self.casadi(pixels)
+
     def histogram_of(self, pixels: ArrayLike) -> Array:
         """Soft histogram (K,) of the compared pixels of a pixel vector (P,)."""
         return self.histogram.numpy(self.normalise(pixels))

@@ -137,7 +137,7 @@ def test_objective_weights_selection_and_twins() -> None:
     expected = 2.0 * float(terms[0][1].numpy(u)) + 0.5 * (u.mean() - 0.3) ** 2
     assert objective.numpy(pixels) == pytest.approx(expected, rel=1e-14)
     x = ca.MX.sym("I", 60)
-    assert float(ca.Function("f", [x], [objective.casadi(x)])(pixels)) == pytest.approx(expected, rel=1e-12)
+    assert float(ca.Function("f", [x], [objective(x)])(pixels)) == pytest.approx(expected, rel=1e-12)
     # At the reference pixels the histogram term vanishes and only the mean term is left.
     at_reference = 0.5 * (ref_pixels[selection].mean() - 0.3) ** 2
     assert objective.numpy(2.0 * ref_pixels) == pytest.approx(at_reference, rel=1e-12)
