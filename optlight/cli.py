@@ -44,6 +44,23 @@ def _cmd_problems(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench(args: argparse.Namespace) -> int:
+    import importlib.util
+    from pathlib import Path
+
+    runner = Path(__file__).resolve().parent.parent / "benchmarks" / "run.py"
+    spec = importlib.util.spec_from_file_location("optlight_benchmarks.run", runner)
+    if not runner.is_file() or spec is None or spec.loader is None:
+        raise OptlightError(
+            f"no benchmark runner at {runner}: `optlight bench` needs the source checkout "
+            "(pip install -e . from the repository), or run `python benchmarks/run.py` there"
+        )
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return int(module.bench(args.names, quick=args.quick, out=Path(args.out) if args.out else None))
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with one subparser per command."""
     parser = argparse.ArgumentParser(
@@ -65,6 +82,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--azimuth", type=float, required=True, help="light azimuth, degrees (90 = from above)")
     p.add_argument("--out", required=True, help="output PNG file")
     add("problems", _cmd_problems, "list the built-in problems")
+    p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
+    p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")
+    p.add_argument("--quick", action="store_true", help="reduced sizes and one solve per problem (CI)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default benchmarks/results)")
     return parser
 
 

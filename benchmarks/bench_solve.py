@@ -1,0 +1,128 @@
+"""Pipeline benchmark: the whole :func:`optlight.solve` on one problem, against the paper's pipeline.
+
+    python benchmarks/bench_solve.py [PROBLEM] [--repeats N] [--json PATH]
+
+Ours: ``optlight.solve(problem)`` (scene, landmarks, placement, path, trajectory NLP, TOPPRA timing,
+verification), repeated; reported per repeat and as median / p98: its own stage timings, the joint
+path length Σ|Δθ| over the knots, the motion time (without dwells), the duration with dwells, the
+largest light residual |h| of the NLP, its iterations, the landmark costs, and whether the NLP
+converged and the plan passed verification (success %). Baseline, in the same run and as many times:
+``baselines.per_knot_ik_plan(problem)`` (the paper's per-knot generalized IK), when ``baselines.py``
+has it; otherwise the result says the baseline is missing.
+:func:`run` returns the numbers as a dict for the benchmark runner.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import baselines  # noqa: E402
+
+import optlight  # noqa: E402
+from optlight.spec import load_problem  # noqa: E402
+
+#: The per-knot IK baseline in ``baselines.py``: ``per_knot_ik_plan(problem) -> dict``.
+BASELINE = "per_knot_ik_plan"
+#: Quantities compared with the baseline: our name -> the baseline dict's key.
+BASELINE_KEYS = {
+    "time_s": "time_s",
+    "joint_path_length_rad": "joint_path_length",
+    "motion_time_s": "motion_time",
+    "max_h_residual_m": "max_h_residual",
+}
+
+
+def _dist(values: Sequence[float]) -> dict[str, float]:
+    return {"median": float(np.median(values)), "p98": float(np.percentile(values, 98))}
+
+
+def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
+    plan = optlight.solve(problem)
+    costs = [landmark.cost for landmark in plan.landmarks]
+    return {
+        "time_s": plan.timings["total"],
+        "stages_s": dict(plan.timings),
+        "joint_path_length_rad": plan.joint_path_length,
+        "motion_time_s": plan.motion_time,
+        "duration_s": plan.trajectory.duration,
+        "max_h_residual_m": plan.nlp.max_h_residual,
+        "nlp_iterations": plan.nlp.iterations,
+        "nlp_success": bool(plan.nlp.success),
+        "verification_passed": bool(plan.verification.passed),
+        "landmark_cost": {"median": float(np.median(costs)), "max": float(np.max(costs))},
+    }
+
+
+def run(problem: str, repeats: int = 1) -> dict[str, Any]:
+    """``repeats`` solves of ``problem`` (name or path) and as many baseline plans; returns the
+    machine-readable results (per repeat under ``runs``, median/p98 under ``plan`` and ``baseline``)."""
+    spec = load_problem(problem)
+    runs = [_solve_once(spec) for _ in range(repeats)]
+    plan = {key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations")}
+    stages = sorted({stage for r in runs for stage in r["stages_s"]})
+    plan["stages_s"] = {s: _dist([r["stages_s"][s] for r in runs if s in r["stages_s"]]) for s in stages}
+
+    per_knot = getattr(baselines, BASELINE, None)
+    baseline_runs = [] if per_knot is None else [per_knot(spec) for _ in range(repeats)]
+    baseline = (
+        {ours: _dist([float(b[theirs]) for b in baseline_runs]) for ours, theirs in BASELINE_KEYS.items()}
+        if baseline_runs
+        else None
+    )
+    return {
+        "benchmark": "solve",
+        "problem": spec.name,
+        "robot": spec.robot.name,
+        "landmarks": spec.landmarks.count,
+        "repeats": repeats,
+        "success_pct": 100.0 * float(np.mean([r["nlp_success"] and r["verification_passed"] for r in runs])),
+        "plan": plan,
+        "runs": runs,
+        "baseline": baseline,
+        "baseline_runs": baseline_runs,
+        "baseline_missing": None if per_knot is not None else f"benchmarks/baselines.py has no {BASELINE}()",
+    }
+
+
+def _print(result: dict[str, Any]) -> None:
+    plan, baseline = result["plan"], result["baseline"]
+    print(
+        f"solve {result['problem']} ({result['robot']}, {result['landmarks']} landmarks), "
+        f"{result['repeats']} repeat(s), success {result['success_pct']:.0f} %"
+    )
+    print(f"{'quantity':24s} {'median':>12s} {'p98':>12s} {'baseline':>12s}")
+    for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations"):
+        theirs = (
+            f"{baseline[key]['median']:12.4g}" if baseline is not None and key in baseline else f"{'–':>12s}"
+        )
+        print(f"{key:24s} {plan[key]['median']:12.4g} {plan[key]['p98']:12.4g} {theirs}")
+    for stage, d in plan["stages_s"].items():
+        print(f"{'stage ' + stage + ' [s]':24s} {d['median']:12.4g} {d['p98']:12.4g}")
+    if result["baseline_missing"]:
+        print(f"baseline missing: {result['baseline_missing']}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("problem", nargs="?", default="default", help="built-in problem name or path")
+    parser.add_argument("--repeats", type=int, default=1, help="solves (and baseline plans) per problem")
+    parser.add_argument("--json", type=Path, help="write the results here as JSON")
+    args = parser.parse_args()
+    result = run(args.problem, args.repeats)
+    _print(result)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,626 @@
+"""Benchmark runner: every component benchmark, then the whole pipeline on every problem.
+
+    python benchmarks/run.py [--quick] [NAME ...] [--out DIR]
+    optlight bench [NAME ...] [--quick] [--out DIR]
+
+A NAME is a component benchmark (a ``bench_<name>.py`` module next to this file, e.g. ``scene``,
+``timing``, ``landmarks``) or a problem (a name in ``problems/`` or a path) for the pipeline benchmark
+(``bench_solve.py``); a component name wins over a problem of the same name (pass the problem's path
+then). Without NAME every component and every problem in ``problems/`` runs.
+
+Each benchmark's ``run(...)`` is called with its own defaults, or in ``--quick`` mode with the sizes of
+:data:`QUICK_SIZES` for the parameters its signature has (a component without a size parameter runs
+as is). A benchmark that raises is recorded as failed with its error and the run continues; the exit
+status is then 1. Printed: one table (benchmark / metric: median, p98, success %, the baseline's median
+measured in the same run, ratio median / baseline median). Written to ``--out`` (default
+``benchmarks/results/``): ``latest.json`` (machine, versions, timestamp, every benchmark's full result
+or error, the table rows) and ``latest.md`` (the table in markdown, with the machine line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import importlib.metadata
+import importlib.util
+import inspect
+import json
+import math
+import os
+import platform
+import subprocess
+import sys
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.measure import Measurement
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    SpinnerColumn,
+    TextColumn,
+    TimeElapsedColumn,
+)
+from rich.table import Table
+from rich.text import Text
+
+from optlight.errors import OptlightError, ProblemError
+from optlight.spec import available_problems, resolve_problem_path
+
+BENCH_DIR = Path(__file__).resolve().parent
+RESULTS_DIR = BENCH_DIR / "results"
+#: Module of the whole-pipeline benchmark, ``run(problem, repeats)``; every other ``bench_*.py`` is a component.
+PIPELINE_MODULE = "bench_solve"
+#: ``--quick`` sizes, passed to a benchmark's ``run`` only for the parameters it has.
+QUICK_SIZES: dict[str, Any] = {"n": 300, "repeats": 1}
+#: Solves per problem in a full run (a component runs with its own defaults).
+PIPELINE_REPEATS = 3
+#: Distributions whose versions are recorded (import names differ: ``pin`` is ``pinocchio``).
+VERSIONED = (
+    "numpy",
+    "scipy",
+    "casadi",
+    "pin",
+    "example-robot-data",
+    "toppra",
+    "meshcat",
+    "trimesh",
+    "embreex",
+    "rich",
+    "optlight",
+)
+#: Statistic key suffixes a component may use, with the unit they denote.
+UNIT_SUFFIXES = {"_ms": "ms", "_s": "s"}
+MS_PER_S = 1e3
+COLUMNS = ("benchmark", "metric", "median", "p98", "success %", "baseline median", "ratio")
+
+Result = dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the table. ``ratio`` is median / baseline median (both measured in the same run)."""
+
+    benchmark: str
+    metric: str
+    median: float | None
+    p98: float | None = None
+    success_pct: float | None = None
+    baseline_median: float | None = None
+
+    @property
+    def ratio(self) -> float | None:
+        if self.median is None or not self.baseline_median:
+            return None
+        return self.median / self.baseline_median
+
+    def cells(self) -> list[str]:
+        """The row as text, in the order of :data:`COLUMNS`."""
+        numbers = (self.median, self.p98, self.success_pct, self.baseline_median, self.ratio)
+        return [self.benchmark, self.metric, *(_number(x) for x in numbers)]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self), "ratio": self.ratio}
+
+
+RowsFn = Callable[[str, Result], list[Row]]
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """One entry of a run. ``load()`` imports the module and returns its ``run`` function (so that an
+    import error is that benchmark's failure); it is called with ``args`` and the ``sizes`` its
+    signature accepts; ``rows(name, result)`` turns the result into table rows."""
+
+    name: str
+    load: Callable[[], Callable[..., Result]]
+    rows: RowsFn
+    args: tuple[Any, ...] = ()
+    sizes: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What one benchmark produced: its result and rows, or the error it raised."""
+
+    name: str
+    kwargs: dict[str, Any]
+    wall_s: float
+    result: Result | None = None
+    rows: list[Row] = field(default_factory=list)
+    error: str | None = None
+    traceback: str | None = None
+
+    @property
+    def failed(self) -> bool:
+        return self.error is not None
+
+
+@dataclass(frozen=True)
+class Report:
+    """A whole run: when, where, in which mode, and every benchmark's outcome."""
+
+    timestamp: str
+    quick: bool
+    machine: dict[str, Any]
+    outcomes: list[Outcome]
+
+    @property
+    def rows(self) -> list[Row]:
+        return [row for outcome in self.outcomes for row in outcome.rows]
+
+    @property
+    def failed(self) -> list[Outcome]:
+        return [outcome for outcome in self.outcomes if outcome.failed]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "timestamp": self.timestamp,
+            "quick": self.quick,
+            "machine": self.machine,
+            "columns": list(COLUMNS),
+            "benchmarks": [
+                {
+                    "name": o.name,
+                    "status": "failed" if o.failed else "ok",
+                    "kwargs": o.kwargs,
+                    "wall_s": o.wall_s,
+                    "error": o.error,
+                    "traceback": o.traceback,
+                    "rows": [row.to_dict() for row in o.rows],
+                    "result": o.result,
+                }
+                for o in self.outcomes
+            ],
+            "failed": [o.name for o in self.failed],
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# Machine and versions
+# --------------------------------------------------------------------------------------------
+
+
+def machine_info() -> dict[str, Any]:
+    """CPU model, cores (all and usable by this process), RAM, OS, Python, library versions, git commit."""
+    return {
+        "cpu": _cpu_model(),
+        "cores": os.cpu_count(),
+        "cores_usable": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "ram_gb": _ram_gb(),
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "versions": {name: _version(name) for name in VERSIONED},
+        "git": _git_state(),
+    }
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name":
+                return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _ram_gb() -> float | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key == "MemTotal":
+                kib = float(value.split()[0])
+                return round(kib / 2**20, 1)
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _version(distribution: str) -> str | None:
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def _git_state() -> dict[str, Any] | None:
+    """The checkout's commit and whether tracked files differ from it; None outside a git checkout."""
+
+    def git(*args: str) -> str:
+        done = subprocess.run(
+            ["git", "-C", str(BENCH_DIR.parent), *args],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=10,
+        )
+        return done.stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return {"commit": commit, "dirty": dirty}
+
+
+def machine_line(machine: dict[str, Any]) -> str:
+    """The machine in one line: CPU, cores, RAM, OS, Python, library versions, commit."""
+    cores = f"{machine['cores']} cores"
+    if machine["cores_usable"] != machine["cores"]:
+        cores += f" ({machine['cores_usable']} usable)"
+    ram = f", {machine['ram_gb']:g} GB RAM" if machine["ram_gb"] is not None else ""
+    versions = ", ".join(f"{k} {v}" for k, v in machine["versions"].items() if v is not None)
+    git = machine["git"]
+    commit = (
+        "" if git is None else f"; git {git['commit'][:10]}{' + uncommitted changes' if git['dirty'] else ''}"
+    )
+    return f"{machine['cpu']}, {cores}{ram}; {machine['os']}; Python {machine['python']}; {versions}{commit}"
+
+
+# --------------------------------------------------------------------------------------------
+# Results -> rows
+# --------------------------------------------------------------------------------------------
+
+
+def _distribution(stats: dict[str, Any]) -> tuple[float, float, str] | None:
+    """(median, p98, unit) if ``stats`` holds ``median``/``p98`` (bare or with a unit suffix)."""
+    for suffix in ("", *UNIT_SUFFIXES):
+        median, p98 = stats.get(f"median{suffix}"), stats.get(f"p98{suffix}")
+        if isinstance(median, int | float) and isinstance(p98, int | float):
+            return float(median), float(p98), UNIT_SUFFIXES.get(suffix, "")
+    return None
+
+
+def _unit_of(key: str) -> str:
+    return next((unit for suffix, unit in UNIT_SUFFIXES.items() if key.endswith(suffix)), "")
+
+
+def distribution_rows(name: str, result: Result) -> list[Row]:
+    """Every distribution in ``result`` (a dict with ``median``/``p98``, or ``median_ms``/``p98_ms`` …,
+    at any depth) as a row named by its key path, with ``success_pct`` when the dict has one."""
+    rows: list[Row] = []
+
+    def walk(node: dict[str, Any], path: tuple[str, ...], unit: str) -> None:
+        for key, value in node.items():
+            if not isinstance(value, dict):
+                continue
+            found = _distribution(value)
+            if found is None:
+                walk(value, (*path, key), _unit_of(key) or unit)
+                continue
+            median, p98, own_unit = found
+            label = "/".join((*path, key))
+            shown_unit = own_unit or _unit_of(key) or unit
+            success = value.get("success_pct")
+            rows.append(
+                Row(
+                    name,
+                    f"{label} [{shown_unit}]" if shown_unit else label,
+                    median,
+                    p98,
+                    float(success) if isinstance(success, int | float) else None,
+                )
+            )
+
+    walk(result, (), "")
+    return rows
+
+
+def landmark_rows(name: str, result: Result) -> list[Row]:
+    """``bench_landmarks``: ours against the paper's fine sweep, per azimuth and in total; success % is
+    the share of azimuths where ours is not worse than the sweep."""
+    per_azimuth = result["per_azimuth"]
+    label = f"{name} {result['problem']}"
+    times = result["time_per_azimuth_s"]
+    costs = np.array([r["cost"] for r in per_azimuth])
+    sweep_costs = np.array([r["sweep_cost"] for r in per_azimuth])
+    iterations = result["iterations_per_azimuth"]
+    return [
+        Row(
+            label,
+            "time per azimuth [ms]",
+            MS_PER_S * times["ours"]["median"],
+            MS_PER_S * times["ours"]["p98"],
+            baseline_median=MS_PER_S * times["sweep"]["median"],
+        ),
+        Row(label, "total time [s]", result["time_s"]["ours"], baseline_median=result["time_s"]["sweep"]),
+        Row(
+            label,
+            "cost per azimuth",
+            float(np.median(costs)),
+            float(np.percentile(costs, 98)),
+            100.0 * float(np.mean([r["not_worse"] for r in per_azimuth])),
+            float(np.median(sweep_costs)),
+        ),
+        Row(label, "IPOPT iterations per azimuth", iterations["median"], iterations["p98"]),
+    ]
+
+
+def solve_rows(name: str, result: Result) -> list[Row]:
+    """``bench_solve``: the whole pipeline against the paper's per-knot IK plan (when it exists);
+    success % is the share of solves whose NLP converged and whose plan passed verification."""
+    label = f"{name} {result['problem']}"
+    ours, baseline = result["plan"], result["baseline"]
+
+    def base(key: str) -> float | None:
+        return None if baseline is None else baseline[key]["median"]
+
+    return [
+        Row(
+            label,
+            "time [s]",
+            ours["time_s"]["median"],
+            ours["time_s"]["p98"],
+            result["success_pct"],
+            base("time_s"),
+        ),
+        Row(
+            label,
+            "joint path length [rad]",
+            ours["joint_path_length_rad"]["median"],
+            baseline_median=base("joint_path_length_rad"),
+        ),
+        Row(label, "motion time [s]", ours["motion_time_s"]["median"], baseline_median=base("motion_time_s")),
+        Row(
+            label, "max |h| [m]", ours["max_h_residual_m"]["median"], baseline_median=base("max_h_residual_m")
+        ),
+        Row(label, "NLP iterations", ours["nlp_iterations"]["median"], ours["nlp_iterations"]["p98"]),
+    ]
+
+
+#: Components whose results need their own reading (a baseline to pair); the rest are read generically.
+COMPONENT_ROWS: dict[str, RowsFn] = {"landmarks": landmark_rows}
+
+
+# --------------------------------------------------------------------------------------------
+# Selecting and running
+# --------------------------------------------------------------------------------------------
+
+
+@functools.cache
+def load_module(path: Path) -> ModuleType:
+    """Import a benchmark module from its file (once); its folder goes on ``sys.path`` for ``baselines``."""
+    folder = str(path.parent)
+    if folder not in sys.path:
+        sys.path.insert(0, folder)
+    module_name = f"optlight_benchmarks.{path.stem}"
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot import {path}")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[module_name]
+        raise
+    return module
+
+
+def _runner(path: Path) -> Callable[[], Callable[..., Result]]:
+    def load() -> Callable[..., Result]:
+        run: Callable[..., Result] = load_module(path).run
+        return run
+
+    return load
+
+
+def components(bench_dir: Path = BENCH_DIR) -> dict[str, Path]:
+    """The component benchmarks in ``bench_dir``: ``bench_<name>.py`` files except the pipeline's."""
+    return {
+        path.stem.removeprefix("bench_"): path
+        for path in sorted(bench_dir.glob("bench_*.py"))
+        if path.stem != PIPELINE_MODULE
+    }
+
+
+def select(names: Sequence[str], quick: bool, bench_dir: Path = BENCH_DIR) -> list[Benchmark]:
+    """The benchmarks to run for ``names`` (see the module docstring), components first."""
+    found = components(bench_dir)
+    if names:
+        chosen = [n for n in names if n in found]
+        problems = [n for n in names if n not in found]
+        for name in problems:
+            try:
+                resolve_problem_path(name)
+            except ProblemError:
+                raise OptlightError(
+                    f"unknown benchmark {name!r}: expected a component ({', '.join(found) or 'none'}), "
+                    f"a problem name ({', '.join(available_problems()) or 'none'}) or a problem file"
+                ) from None
+    else:
+        chosen, problems = list(found), list(available_problems())
+    sizes = QUICK_SIZES if quick else {}
+    benchmarks = [
+        Benchmark(name, _runner(found[name]), COMPONENT_ROWS.get(name, distribution_rows), sizes=dict(sizes))
+        for name in chosen
+    ]
+    solve = _runner(bench_dir / f"{PIPELINE_MODULE}.py")
+    repeats = QUICK_SIZES["repeats"] if quick else PIPELINE_REPEATS
+    benchmarks += [
+        Benchmark("solve", solve, solve_rows, (problem,), {"repeats": repeats}) for problem in problems
+    ]
+    return benchmarks
+
+
+def run_one(benchmark: Benchmark) -> Outcome:
+    """Run one benchmark; any exception it raises is caught and recorded as its failure."""
+    kwargs: dict[str, Any] = {}
+    start = time.perf_counter()
+    try:
+        run = benchmark.load()
+        accepted = inspect.signature(run).parameters
+        kwargs = {k: v for k, v in benchmark.sizes.items() if k in accepted}
+        result = run(*benchmark.args, **kwargs)
+        rows = benchmark.rows(benchmark.name, result)
+    except Exception as e:
+        return Outcome(
+            _title(benchmark),
+            kwargs,
+            time.perf_counter() - start,
+            error=f"{type(e).__name__}: {e}",
+            traceback=traceback.format_exc(),
+        )
+    return Outcome(_title(benchmark), kwargs, time.perf_counter() - start, result, rows)
+
+
+def _title(benchmark: Benchmark) -> str:
+    return " ".join([benchmark.name, *(str(a) for a in benchmark.args)])
+
+
+def run_all(benchmarks: Sequence[Benchmark], quick: bool, console: Console | None = None) -> Report:
+    """Run ``benchmarks`` in order with a progress bar on ``console`` (stderr by default)."""
+    machine = machine_info()
+    timestamp = datetime.now(UTC).isoformat(timespec="seconds")
+    outcomes = []
+    columns = (
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+    )
+    with Progress(*columns, console=console or Console(stderr=True)) as progress:
+        task = progress.add_task("benchmarks", total=len(benchmarks))
+        for benchmark in benchmarks:
+            progress.update(task, description=_title(benchmark))
+            outcome = run_one(benchmark)
+            outcomes.append(outcome)
+            if outcome.failed:
+                progress.console.print(Text(f"failed: {outcome.name}: {outcome.error}", style="red"))
+            progress.advance(task)
+        progress.update(task, description="benchmarks")
+    return Report(timestamp, quick, machine, outcomes)
+
+
+# --------------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------------
+
+
+def _number(x: float | None) -> str:
+    return "–" if x is None or not math.isfinite(x) else f"{x:.4g}"
+
+
+def _title_line(report: Report) -> str:
+    mode = "quick" if report.quick else "full"
+    return f"optlight benchmarks ({mode} run, {report.timestamp})"
+
+
+def table(report: Report) -> Table:
+    """The rows as a rich table, failed benchmarks at the end, the machine line as caption."""
+    out = Table(title=_title_line(report), caption=machine_line(report.machine))
+    for name in COLUMNS:
+        out.add_column(name, justify="left" if name in ("benchmark", "metric") else "right", no_wrap=True)
+    for row in report.rows:
+        out.add_row(*(Text(cell) for cell in row.cells()))
+    for outcome in report.failed:
+        out.add_row(Text(outcome.name), Text("FAILED", style="bold red"), *[""] * (len(COLUMNS) - 2))
+    return out
+
+
+def markdown(report: Report) -> str:
+    """The same table in markdown, preceded by the title and machine line, failures listed after it."""
+
+    def line(cells: Sequence[str]) -> str:
+        return "| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |"
+
+    lines = [
+        f"**{_title_line(report)}**",
+        "",
+        f"Machine: {machine_line(report.machine)}",
+        "",
+        line(COLUMNS),
+        "|" + "|".join("---" if name in ("benchmark", "metric") else "---:" for name in COLUMNS) + "|",
+        *(line(row.cells()) for row in report.rows),
+    ]
+    if report.failed:
+        lines += ["", "Failed:", ""]
+        lines += [f"- `{outcome.name}`: {outcome.error}" for outcome in report.failed]
+    return "\n".join(lines) + "\n"
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data: NumPy scalars and arrays, paths and dataclasses converted, non-finite
+    floats as null; anything else that JSON cannot hold as its ``str``."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, str | int | bool):
+        return value
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return _plain(dataclasses.asdict(value))
+    return str(value)
+
+
+def write(report: Report, out_dir: Path) -> tuple[Path, Path]:
+    """Write ``latest.json`` and ``latest.md`` into ``out_dir``; returns their paths."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    json_path, md_path = out_dir / "latest.json", out_dir / "latest.md"
+    json_path.write_text(json.dumps(_plain(report.to_dict()), indent=2, allow_nan=False) + "\n")
+    md_path.write_text(markdown(report))
+    return json_path, md_path
+
+
+def bench(names: Sequence[str] = (), quick: bool = False, out: Path | None = None) -> int:
+    """Select, run, print and write; returns the exit status (1 if any benchmark failed)."""
+    benchmarks = select(names, quick)
+    report = run_all(benchmarks, quick)
+    printed = table(report)
+    console = Console()
+    # At its natural width even where the terminal (or a CI log's default of 80 columns) is narrower:
+    # numbers and metric names cut short with an ellipsis would be worse than long lines.
+    unbounded = console.options.update_width(sys.maxsize)
+    console.width = max(console.width, Measurement.get(console, unbounded, printed).maximum)
+    console.print(printed)
+    json_path, md_path = write(report, out if out is not None else RESULTS_DIR)
+    console.print(Text(f"wrote {json_path} and {md_path}"))
+    if report.failed:
+        errors = Console(stderr=True)
+        for outcome in report.failed:
+            errors.print(Text(f"FAILED {outcome.name}: {outcome.error}", style="red"))
+        return 1
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python benchmarks/run.py``: returns the exit status (2 for an unknown NAME)."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "names",
+        nargs="*",
+        metavar="NAME",
+        help="component benchmark (e.g. scene, timing, landmarks) or problem name/file; default: all",
+    )
+    parser.add_argument("--quick", action="store_true", help="reduced sizes and one solve per problem (CI)")
+    parser.add_argument("--out", type=Path, help=f"output folder (default {RESULTS_DIR})")
+    args = parser.parse_args(argv)
+    try:
+        return bench(args.names, args.quick, args.out)
+    except OptlightError as e:
+        print(f"run.py: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
