@@ -5,10 +5,10 @@
 Ours: ``optlight.solve(problem)`` (scene, landmarks, placement, path, trajectory NLP, TOPPRA timing,
 verification), repeated; reported per repeat and as median / p98: its own stage timings, the joint
 path length Σ|Δθ| over the knots, the motion time (without dwells), the duration with dwells, the
-largest light residual |h| of the NLP, its iterations, the landmark costs, and whether the NLP
-converged and the plan passed verification (success %). Baseline, in the same run and as many times:
-``baselines.per_knot_ik_plan(problem)`` (the paper's per-knot generalized IK), when ``baselines.py``
-has it; otherwise the result says the baseline is missing.
+largest light residual |h| of the NLP, its iterations, the costs of the landmarks visited, and
+whether the NLP converged and the plan passed verification (success %). Baseline, in the same run
+and as many times: ``baselines.per_knot_ik_plan(problem)`` (the paper's per-knot generalized IK),
+when ``baselines.py`` has it; otherwise the result says the baseline is missing.
 :func:`run` returns the numbers as a dict for the benchmark runner.
 """
 
@@ -47,7 +47,7 @@ def _dist(values: Sequence[float]) -> dict[str, float]:
 
 def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
     plan = optlight.solve(problem)
-    costs = [landmark.cost for landmark in plan.landmarks]
+    costs = [landmark.cost for landmark in plan.visited]
     return {
         "time_s": plan.timings["total"],
         "stages_s": dict(plan.timings),
@@ -58,7 +58,10 @@ def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
         "nlp_iterations": plan.nlp.iterations,
         "nlp_success": bool(plan.nlp.success),
         "verification_passed": bool(plan.verification.passed),
+        "landmarks_found": len(plan.landmarks),
+        "landmarks_visited": len(plan.visited),
         "landmark_cost": {"median": float(np.median(costs)), "max": float(np.max(costs))},
+        "warnings": list(plan.warnings),
     }
 
 
@@ -67,7 +70,9 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
     machine-readable results (per repeat under ``runs``, median/p98 under ``plan`` and ``baseline``)."""
     spec = load_problem(problem)
     runs = [_solve_once(spec) for _ in range(repeats)]
-    plan = {key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations")}
+    plan: dict[str, Any] = {
+        key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations")
+    }
     stages = sorted({stage for r in runs for stage in r["stages_s"]})
     plan["stages_s"] = {s: _dist([r["stages_s"][s] for r in runs if s in r["stages_s"]]) for s in stages}
 

@@ -82,6 +82,8 @@ VERSIONED = (
 #: Statistic key suffixes a component may use, with the unit they denote.
 UNIT_SUFFIXES = {"_ms": "ms", "_s": "s"}
 MS_PER_S = 1e3
+#: The IK baseline in ``bench_ik``: pinocchio's CLIK example, unchanged but for the frame.
+IK_BASELINE = "clik dt=0.1"
 COLUMNS = ("benchmark", "metric", "median", "p98", "success %", "baseline median", "ratio")
 
 Result = dict[str, Any]
@@ -349,6 +351,28 @@ def landmark_rows(name: str, result: Result) -> list[Row]:
     ]
 
 
+def ik_rows(name: str, result: Result) -> list[Row]:
+    """``bench_ik``: time per pose of every method on every robot; our methods (``ours …``) against
+    :data:`IK_BASELINE` on the same poses; success % is the share of poses whose solution was re-checked
+    (``verified_pct``)."""
+    rows = []
+    for robot, methods in result["robots"].items():
+        baseline = methods.get(IK_BASELINE)
+        for method, stats in methods.items():
+            paired = baseline is not None and method.startswith("ours")
+            rows.append(
+                Row(
+                    f"{name} {robot}",
+                    f"{method} [ms]",
+                    stats["median_ms"],
+                    stats["p98_ms"],
+                    stats["verified_pct"],
+                    baseline["median_ms"] if paired else None,
+                )
+            )
+    return rows
+
+
 def solve_rows(name: str, result: Result) -> list[Row]:
     """``bench_solve``: the whole pipeline against the paper's per-knot IK plan (when it exists);
     success % is the share of solves whose NLP converged and whose plan passed verification."""
@@ -382,7 +406,7 @@ def solve_rows(name: str, result: Result) -> list[Row]:
 
 
 #: Components whose results need their own reading (a baseline to pair); the rest are read generically.
-COMPONENT_ROWS: dict[str, RowsFn] = {"landmarks": landmark_rows}
+COMPONENT_ROWS: dict[str, RowsFn] = {"ik": ik_rows, "landmarks": landmark_rows}
 
 
 # --------------------------------------------------------------------------------------------
@@ -392,10 +416,7 @@ COMPONENT_ROWS: dict[str, RowsFn] = {"landmarks": landmark_rows}
 
 @functools.cache
 def load_module(path: Path) -> ModuleType:
-    """Import a benchmark module from its file (once); its folder goes on ``sys.path`` for ``baselines``."""
-    folder = str(path.parent)
-    if folder not in sys.path:
-        sys.path.insert(0, folder)
+    """Import a benchmark module from its file (once per path)."""
     module_name = f"optlight_benchmarks.{path.stem}"
     spec = importlib.util.spec_from_file_location(module_name, path)
     if spec is None or spec.loader is None:
@@ -582,9 +603,12 @@ def write(report: Report, out_dir: Path) -> tuple[Path, Path]:
     return json_path, md_path
 
 
-def bench(names: Sequence[str] = (), quick: bool = False, out: Path | None = None) -> int:
-    """Select, run, print and write; returns the exit status (1 if any benchmark failed)."""
-    benchmarks = select(names, quick)
+def bench(
+    names: Sequence[str] = (), quick: bool = False, out: Path | None = None, bench_dir: Path = BENCH_DIR
+) -> int:
+    """Select (from ``bench_dir``), run, print and write to ``out`` (default ``benchmarks/results``);
+    returns the exit status, 1 if any benchmark failed."""
+    benchmarks = select(names, quick, bench_dir)
     report = run_all(benchmarks, quick)
     printed = table(report)
     console = Console()

@@ -1,0 +1,168 @@
+"""The benchmark runner on synthetic components (never the real benchmarks): discovery, quick sizes,
+rows, the rich table, markdown and JSON, failures recorded with a non-zero exit status, the CLI."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+from rich.console import Console
+
+from optlight import cli
+from optlight.errors import OptlightError
+
+RUNNER = Path(__file__).resolve().parent.parent / "benchmarks" / "run.py"
+
+FAKE = """
+def run(n: int = 10000, seed: int = 0) -> dict:
+    return {
+        "solve": {"median_ms": 1.5, "p98_ms": 2.25, "success_pct": 97.5, "n": n},
+        "sweep_s": {"coarse": {"median": 0.125, "p98": 0.5}},
+        "meta": {"n": n, "seed": seed},
+    }
+"""
+
+BROKEN = """
+def run() -> dict:
+    raise ValueError("broken on purpose")
+"""
+
+
+def load_runner() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("test_bench_runner_run", RUNNER)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def runner() -> ModuleType:
+    return load_runner()
+
+
+@pytest.fixture
+def bench_dir(tmp_path: Path) -> Path:
+    folder = tmp_path / "benchmarks"
+    folder.mkdir()
+    (folder / "bench_fake.py").write_text(FAKE)
+    (folder / "bench_broken.py").write_text(BROKEN)
+    return folder
+
+
+def test_discovery_and_default_selection(runner: ModuleType, bench_dir: Path) -> None:
+    (bench_dir / f"{runner.PIPELINE_MODULE}.py").write_text("")
+    assert list(runner.components(bench_dir)) == ["broken", "fake"]
+    selected = runner.select([], quick=False, bench_dir=bench_dir)
+    problems = list(runner.available_problems())
+    assert [b.name for b in selected] == ["broken", "fake", *["solve"] * len(problems)]
+    assert [b.args for b in selected[2:]] == [(p,) for p in problems]
+    assert all(b.sizes == {"repeats": runner.PIPELINE_REPEATS} for b in selected[2:])
+    assert all(b.sizes == {} for b in selected[:2])
+
+
+def test_unknown_name(runner: ModuleType, bench_dir: Path) -> None:
+    with pytest.raises(OptlightError, match="unknown benchmark 'nope'.*broken, fake"):
+        runner.select(["nope"], quick=True, bench_dir=bench_dir)
+
+
+def test_quick_sizes_rows_and_writers(runner: ModuleType, bench_dir: Path, tmp_path: Path) -> None:
+    report = runner.run_all(runner.select(["fake"], quick=True, bench_dir=bench_dir), quick=True)
+    (outcome,) = report.outcomes
+    assert not outcome.failed
+    assert outcome.kwargs == {"n": runner.QUICK_SIZES["n"]}  # only the sizes run() accepts
+    assert outcome.result["meta"] == {"n": runner.QUICK_SIZES["n"], "seed": 0}
+    assert [(r.metric, r.median, r.p98, r.success_pct) for r in report.rows] == [
+        ("solve [ms]", 1.5, 2.25, 97.5),
+        ("sweep_s/coarse [s]", 0.125, 0.5, None),
+    ]
+
+    console = Console(record=True, width=200)
+    console.print(runner.table(report))
+    text = console.export_text()
+    assert "solve [ms]" in text and "sweep_s/coarse [s]" in text and "97.5" in text
+    assert report.machine["python"] in text
+
+    json_path, md_path = runner.write(report, tmp_path / "results")
+    data = json.loads(json_path.read_text())
+    assert data["quick"] is True and data["failed"] == [] and data["timestamp"] == report.timestamp
+    machine = data["machine"]
+    assert {"cpu", "cores", "ram_gb", "os", "python", "versions", "git"} <= set(machine)
+    assert {"numpy", "casadi", "pin", "toppra", "meshcat", "trimesh", "embreex", "optlight"} <= set(
+        machine["versions"]
+    )
+    (bench,) = data["benchmarks"]
+    assert bench["status"] == "ok" and bench["result"]["solve"]["n"] == runner.QUICK_SIZES["n"]
+    assert bench["rows"][0] == {
+        "benchmark": "fake",
+        "metric": "solve [ms]",
+        "median": 1.5,
+        "p98": 2.25,
+        "success_pct": 97.5,
+        "baseline_median": None,
+        "ratio": None,
+    }
+
+    md = md_path.read_text()
+    assert "| benchmark | metric | median | p98 | success % | baseline median | ratio |" in md
+    assert "| fake | solve [ms] | 1.5 | 2.25 | 97.5 | – | – |" in md
+    assert f"Python {report.machine['python']}" in md
+
+
+def test_failure_recorded_and_exit_status(runner: ModuleType, bench_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "results"
+    status = runner.bench(["broken", "fake"], quick=True, out=out, bench_dir=bench_dir)
+    assert status == 1
+    data = json.loads((out / "latest.json").read_text())
+    assert data["failed"] == ["broken"]
+    broken, fake = data["benchmarks"]
+    assert broken["status"] == "failed" and broken["error"] == "ValueError: broken on purpose"
+    assert "raise ValueError" in broken["traceback"] and broken["result"] is None
+    assert fake["status"] == "ok" and fake["rows"]  # the run went on after the failure
+    assert "- `broken`: ValueError: broken on purpose" in (out / "latest.md").read_text()
+    assert runner.bench(["fake"], quick=True, out=out, bench_dir=bench_dir) == 0
+
+
+def test_baseline_pairing(runner: ModuleType) -> None:
+    dist = {"median": 2.0, "p98": 3.0}
+    plan = {
+        key: dist
+        for key in ("time_s", "joint_path_length_rad", "motion_time_s", "max_h_residual_m", "nlp_iterations")
+    }
+    result = {"problem": "p", "success_pct": 100.0, "plan": plan, "baseline": None}
+    rows = runner.solve_rows("solve", result)
+    assert rows[0].cells() == ["solve p", "time [s]", "2", "3", "100", "–", "–"]
+    result["baseline"] = {key: {"median": 8.0, "p98": 9.0} for key in plan}
+    rows = runner.solve_rows("solve", result)
+    assert [r.ratio for r in rows] == [0.25, 0.25, 0.25, 0.25, None]
+
+    ik = {"robots": {"ur5": {"ours 5-D": {"median_ms": 0.5, "p98_ms": 1.0, "verified_pct": 99.0}}}}
+    ik["robots"]["ur5"][runner.IK_BASELINE] = {"median_ms": 2.0, "p98_ms": 4.0, "verified_pct": 80.0}
+    ours, clik = runner.ik_rows("ik", ik)
+    assert (ours.benchmark, ours.ratio, ours.success_pct) == ("ik ur5", 0.25, 99.0)
+    assert clik.ratio is None
+
+
+def test_json_safe(runner: ModuleType) -> None:
+    import numpy as np
+
+    plain = runner._plain({"a": np.float64(1.5), "b": np.arange(2), "c": float("nan"), "d": (Path("x"),)})
+    assert json.dumps(plain, allow_nan=False) == '{"a": 1.5, "b": [0, 1], "c": null, "d": ["x"]}'
+
+
+def test_cli_help(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["bench", "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    assert "--quick" in out and "--out" in out and "PROBLEM" in out
+
+
+def test_cli_unknown_name(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["bench", "no_such_benchmark_or_problem"]) == 2
+    assert "unknown benchmark 'no_such_benchmark_or_problem'" in capsys.readouterr().err
