@@ -2,8 +2,19 @@
 
 Where the light should go (landmarks that minimise a luminance objective through a differentiable
 Lambertian model) and how the robot gets there (light constraints h1–h3, generalized IK, great-circle
-paths, trajectory optimisation, TOPPRA timing, independent verification, Meshcat preview).
+paths, trajectory optimisation, TOPPRA timing, independent verification, Meshcat preview)::
+
+    import optlight
+    plan = optlight.solve("default")       # a problem file path or a built-in name
+    plan.save("results/default")
+
+The heavy parts (CasADi, pinocchio, meshcat) are imported on first use of the names that need them.
 """
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
 
 from optlight.errors import (
     OptlightError,
@@ -14,21 +25,80 @@ from optlight.errors import (
     VerificationError,
 )
 from optlight.geometry import LightSphere
-from optlight.scene.camera import Camera
 from optlight.spec import Problem, available_problems, load_problem
+
+if TYPE_CHECKING:
+    from optlight.objectives import Objective
+    from optlight.pipeline import Plan, solve
+    from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
+    from optlight.planning.timing import Trajectory, time_parameterize
+    from optlight.robot import IKResult, ReachabilityMap, Robot, generalized_ik, load_robot, reachability_map
+    from optlight.scene import Camera, Scene
+    from optlight.verify import VerificationReport, verify_trajectory
+    from optlight.viz.preview import Preview
 
 __version__ = "0.1.0"
 
+_LAZY = {
+    "Camera": "optlight.scene",
+    "Scene": "optlight.scene",
+    "Objective": "optlight.objectives",
+    "Landmark": "optlight.planning.landmarks",
+    "LandmarkSet": "optlight.planning.landmarks",
+    "find_landmarks": "optlight.planning.landmarks",
+    "Robot": "optlight.robot",
+    "IKResult": "optlight.robot",
+    "load_robot": "optlight.robot",
+    "generalized_ik": "optlight.robot",
+    "ReachabilityMap": "optlight.robot",
+    "reachability_map": "optlight.robot",
+    "Trajectory": "optlight.planning.timing",
+    "time_parameterize": "optlight.planning.timing",
+    "VerificationReport": "optlight.verify",
+    "verify_trajectory": "optlight.verify",
+    "Plan": "optlight.pipeline",
+    "solve": "optlight.pipeline",
+    "Preview": "optlight.viz.preview",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import the module that defines ``name`` on first use (PEP 562)."""
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'optlight' has no attribute {name!r}")
+
+
 __all__ = [
     "Camera",
+    "IKResult",
+    "Landmark",
+    "LandmarkSet",
     "LightSphere",
+    "Objective",
     "OptlightError",
+    "Plan",
+    "Preview",
     "Problem",
     "ProblemError",
+    "ReachabilityMap",
+    "Robot",
     "RobotError",
+    "Scene",
     "SolverError",
+    "Trajectory",
     "UnreachableError",
     "VerificationError",
+    "VerificationReport",
     "available_problems",
+    "find_landmarks",
+    "generalized_ik",
     "load_problem",
+    "load_robot",
+    "reachability_map",
+    "solve",
+    "time_parameterize",
+    "verify_trajectory",
 ]

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
+import warnings
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +36,90 @@ def _cmd_render(args: argparse.Namespace) -> int:
     image = scene.render(position, noise=problem.light.noise_std > 0)
     path = save_gray_png(args.out, image, problem.light.saturation)
     print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
+    return 0
+
+
+def _cmd_solve(args: argparse.Namespace) -> int:
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+    from rich.table import Table
+
+    from optlight.pipeline import STAGES, solve
+
+    console = Console(stderr=True)
+    problem = load_problem(args.problem)
+    out = Path(args.out) if args.out else Path("results") / problem.name
+    with Progress(
+        TextColumn("{task.description:<10}"),
+        BarColumn(),
+        TextColumn("{task.completed}/{task.total}"),
+        TimeElapsedColumn(),
+        console=console,
+        transient=False,
+    ) as bars:
+        tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES}
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bars.start_task(tasks[stage])
+            bars.update(tasks[stage], completed=done, total=total)
+
+        with warnings.catch_warnings(record=True):
+            plan = solve(problem, progress=progress)
+    table = Table(title=f"optlight solve {problem.name}", show_header=False)
+    for key, value in _summary_rows(plan.summary()):
+        table.add_row(key, value)
+    console.print(table)
+    for note in plan.warnings:
+        console.print(f"[yellow]warning:[/yellow] {note}")
+    if not plan.verification.passed:
+        console.print(plan.verification.summary())
+    with console.status(f"writing {out}/ (figures, preview, report)"):
+        plan.save(out, overwrite=True)  # refuses (VerificationError) when verification failed
+    console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
+    if args.view:
+        from optlight.report import make_preview
+        from optlight.viz.preview import Preview
+
+        with make_preview(plan, Preview).serve() as url:
+            console.print(f"live preview at {url} — press Ctrl-C to stop")
+            _wait_for_interrupt()
+    return 0
+
+
+def _summary_rows(s: dict) -> list[tuple[str, str]]:
+    return [
+        ("robot", s["robot"]),
+        ("landmarks", str(s["landmarks"])),
+        ("mean landmark cost", f"{s['mean_landmark_cost']:.3g}"),
+        ("path knots", str(s["knots"])),
+        ("trajectory NLP", f"{s['nlp_status']} ({s['nlp_iterations']} iterations)"),
+        ("max |h|", f"{s['max_h_residual_m']:.2e} m"),
+        (
+            "joint path (NLP / per-knot IK)",
+            f"{s['joint_path_length_rad']:.3f} / {s['knot_ik_path_length_rad']:.3f} rad",
+        ),
+        ("duration", f"{s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving)"),
+        ("verification", "passed" if s["verification_passed"] else "FAILED"),
+        ("solve time", f"{s['timings_s']['total']:.2f} s"),
+    ]
+
+
+def _wait_for_interrupt() -> None:
+    try:
+        while True:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+
+
+def _cmd_reach(args: argparse.Namespace) -> int:
+    from optlight.robot import reachability_map
+
+    problem = load_problem(args.problem)
+    result = reachability_map(problem, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
+    png, js = result.save(args.out)
+    print(f"{100 * result.reachable_fraction:.1f}% of the light cap reachable by {problem.robot.name}")
+    print(f"wrote {png} and {js}")
     return 0
 
 
@@ -76,6 +163,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = add("check", _cmd_check, "validate a problem file")
     p.add_argument("problem", help="problem file path or built-in name")
+    p = add("solve", _cmd_solve, "solve a problem: landmarks, trajectory, verification, results folder")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--out", help="results folder (default: results/<problem name>)")
+    p.add_argument(
+        "--view", action="store_true", help="serve the live Meshcat preview on 127.0.0.1 afterwards"
+    )
+    p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--out", required=True, help="output folder for reachability.png and reachability.json")
+    p.add_argument("--zenith-step", type=float, default=5.0, help="grid step in zenith, degrees")
+    p.add_argument("--azimuth-step", type=float, default=10.0, help="grid step in azimuth, degrees")
     p = add("render", _cmd_render, "render the camera image for one light position")
     p.add_argument("problem", help="problem file path or built-in name")
     p.add_argument("--zenith", type=float, required=True, help="light zenith, degrees from the camera axis")

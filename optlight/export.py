@@ -20,7 +20,7 @@ import math
 import os
 import shutil
 import uuid
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -127,6 +127,7 @@ def write_results(
     light_directions_camera: ArrayLike,
     image_pattern: str,
     figures: Mapping[str, Figure] | None = None,
+    writers: Sequence[Callable[[Path], Sequence[Path]]] = (),
     overwrite: bool = False,
     csv_rate_hz: float = 100.0,
 ) -> list[Path]:
@@ -140,6 +141,9 @@ def write_results(
     Args:
         light_directions_camera: (M, 3) unit vectors from the object towards the light at each capture,
             in the OpenCV camera frame (e.g. ``camera.to_camera_frame((a − O) / b)``).
+        writers: callables that write further files (figures, preview, report) into the folder they
+            are given and return the paths they wrote; they run before plan.json is written, so the
+            folder appears with all of them or not at all.
         overwrite: replace an existing non-empty ``folder``; otherwise that is an error.
 
     Raises:
@@ -173,6 +177,9 @@ def write_results(
     if folder.exists() and not (folder.is_dir() and not any(folder.iterdir())) and not overwrite:
         raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True to replace it")
 
+    def plan_text(files: list[str]) -> str:
+        return json.dumps({**plan, "files": files}, indent=2, allow_nan=False) + "\n"
+
     files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
     plan = {
         **json_safe(dict(plan_dict)),
@@ -188,20 +195,21 @@ def write_results(
             }
         ),
         "versions": library_versions(),
-        "files": files,
         "created_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
-    plan_text = json.dumps(plan, indent=2, allow_nan=False) + "\n"
+    plan_text(files)  # fails here, before anything is written, when plan_dict holds non-JSON data
 
     folder.parent.mkdir(parents=True, exist_ok=True)
     staging = folder.parent / f".{folder.name}.tmp-{uuid.uuid4().hex[:8]}"
     staging.mkdir()
     try:
         trajectory.to_csv(staging / "trajectory.csv", joint_names, rate_hz=csv_rate_hz)
-        (staging / "plan.json").write_text(plan_text)
         (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
         for name, figure in (figures or {}).items():
             figure.savefig(staging / f"{name}.png", dpi=120)
+        for writer in writers:
+            files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
+        (staging / "plan.json").write_text(plan_text(files))
         _move_into_place(staging, folder)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -1,4 +1,5 @@
-"""Figures of a timed trajectory: q, q̇, q̈ of every joint against its limits, dwells shaded.
+"""Figures of a timed trajectory: q, q̇, q̈ of every joint against its limits, dwells shaded; the
+light's path on the sphere.
 
 Built on :class:`matplotlib.figure.Figure` (no pyplot, no global backend state); ``savefig`` to a
 PNG renders with Agg, so this works headless.
@@ -7,11 +8,14 @@ PNG renders with Agg, so this works headless.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.projections.polar import PolarAxes
 from numpy.typing import ArrayLike
 
+from optlight.geometry import LightSphere
 from optlight.planning.timing import Trajectory
 
 
@@ -82,3 +86,49 @@ def save_trajectory_figure(
     path = Path(path)
     fig.savefig(path, dpi=dpi)
     return path
+
+
+def path_figure(
+    sphere: LightSphere,
+    planned: ArrayLike,
+    timed: ArrayLike,
+    landmarks: ArrayLike,
+) -> Figure:
+    """The light's path on the sphere: planned knots, the timed trajectory's light positions and the
+    landmarks (world frame, m), as a polar projection (radius = zenith in degrees, angle = azimuth) and
+    a 3-D view around O."""
+    fig = Figure(figsize=(10.5, 5.0))
+    polar = cast(PolarAxes, fig.add_subplot(1, 2, 1, projection="polar"))
+    points = {"planned knots": planned, "timed trajectory": timed, "landmarks": landmarks}
+    styles = {
+        "planned knots": {"marker": ".", "linestyle": "none", "color": "tab:blue", "markersize": 4},
+        "timed trajectory": {"linestyle": "-", "color": "tab:orange", "linewidth": 1.0},
+        "landmarks": {"marker": "o", "linestyle": "none", "color": "tab:red", "markersize": 6, "mfc": "none"},
+    }
+    for label, pts in points.items():
+        zen, az = sphere.angles(np.asarray(pts, float).reshape(-1, 3))
+        polar.plot(az, np.rad2deg(zen), label=label, **styles[label])  # type: ignore[arg-type]
+    polar.set_rlim(0.0, float(np.rad2deg(sphere.zenith_max)))
+    polar.set_title("zenith (radius, °) and azimuth of the light", fontsize=10)
+    polar.legend(loc="lower left", bbox_to_anchor=(-0.15, -0.15), fontsize=8)
+
+    ax3 = fig.add_subplot(1, 2, 2, projection="3d")
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi, 19))
+    c, b = sphere.center, sphere.radius
+    ax3.plot_wireframe(
+        c[0] + b * np.cos(u) * np.sin(v),
+        c[1] + b * np.sin(u) * np.sin(v),
+        c[2] + b * np.cos(v),
+        color="0.85",
+        linewidth=0.4,
+    )
+    for label, pts in points.items():
+        p = np.asarray(pts, float).reshape(-1, 3)
+        ax3.plot(p[:, 0], p[:, 1], p[:, 2], **styles[label])
+    ax3.set_xlabel("x (m)")
+    ax3.set_ylabel("y (m)")
+    ax3.set_zlabel("z (m)")
+    ax3.set_box_aspect((1, 1, 1))
+    ax3.set_title("world frame", fontsize=10)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,297 @@
+"""The whole job: ``plan = optlight.solve(problem)``, then ``plan.save(folder)``.
+
+Stages (each timed in ``Plan.timings``):
+
+1. ``scene``: camera, object, G-buffer;
+2. ``landmarks``: where the light should go (:func:`optlight.planning.landmarks.find_landmarks`);
+3. ``placement``: joint angles at every landmark by generalized IK (5-D task, roll free), chained
+   from one landmark to the next; a landmark the robot cannot reach is an error that names it, or is
+   dropped with a warning when ``[landmarks] allow_partial`` is set;
+4. ``path``: visiting order (azimuth, or a short open tour in joint space), great-circle knots, and
+   per-knot IK along the path (the paper's pipeline, and the NLP's warm start);
+5. ``nlp``: the trajectory NLP over all knots (:class:`TrajectoryOptimizer`);
+6. ``timing``: TOPPRA per landmark pair with a dwell at every landmark;
+7. ``verify``: dense resampling, independent of the planner.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from optlight.errors import SolverError, UnreachableError
+from optlight.geometry import LightSphere
+from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
+from optlight.planning.path import LightPath, azimuth_order, build_path, shortest_open_tour
+from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.trajectory import TrajectoryNLPResult, TrajectoryOptimizer
+from optlight.robot import IKResult, Robot, generalized_ik, load_robot
+from optlight.scene import Scene
+from optlight.spec import Problem, load_problem
+from optlight.verify import VerificationReport, verify_trajectory
+
+Array = NDArray[np.float64]
+
+#: progress(stage, done, total): called as each stage advances.
+Progress = Callable[[str, int, int], None]
+
+STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A solved problem: where the light goes, how the robot gets there, and the proof it is safe.
+
+    ``landmarks`` the landmark search; ``visited`` the landmarks kept, in visiting order;
+    ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots; ``knot_ik`` the
+    per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised knots;
+    ``trajectory`` the timed motion; ``verification`` the independent check; ``timings`` seconds per
+    stage and ``total``; ``warnings`` what was dropped or degraded.
+    """
+
+    problem: Problem
+    scene: Scene
+    robot: Robot
+    landmarks: LandmarkSet
+    visited: tuple[Landmark, ...]
+    landmark_thetas: Array
+    path: LightPath
+    knot_ik: Array
+    nlp: TrajectoryNLPResult
+    trajectory: Trajectory
+    verification: VerificationReport
+    timings: dict[str, float]
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def joint_path_length(self) -> float:
+        """Σ_k |θ_{k+1} − θ_k| over the optimised knots (rad)."""
+        return joint_path_length(self.nlp.theta)
+
+    @property
+    def motion_time(self) -> float:
+        """Time spent moving (s): the trajectory's duration without the dwells."""
+        intervals = self.trajectory.landmark_intervals
+        return float(self.trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0]))
+
+    @property
+    def light_directions_camera(self) -> Array:
+        """(M, 3) unit vectors from the object to the light at each capture, OpenCV camera frame."""
+        positions = np.array([lm.position for lm in self.visited])
+        d = (positions - self.scene.sphere.center) / self.scene.sphere.radius
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return self.scene.camera.to_camera_frame(d)
+
+    def summary(self) -> dict[str, Any]:
+        """The key numbers, JSON-safe."""
+        return {
+            "problem": self.problem.name,
+            "robot": self.robot.name,
+            "landmarks": len(self.visited),
+            "knots": self.path.n_knots,
+            "mean_landmark_cost": float(np.mean([lm.cost for lm in self.visited])),
+            "nlp_status": self.nlp.status,
+            "nlp_iterations": self.nlp.iterations,
+            "max_h_residual_m": self.nlp.max_h_residual,
+            "joint_path_length_rad": self.joint_path_length,
+            "knot_ik_path_length_rad": joint_path_length(self.knot_ik),
+            "duration_s": self.trajectory.duration,
+            "motion_time_s": self.motion_time,
+            "verification_passed": self.verification.passed,
+            "timings_s": dict(self.timings),
+        }
+
+    def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
+        """Write the results folder (see :func:`optlight.report.save_plan`); refused when the plan
+        failed verification. Returns the paths written."""
+        from optlight.report import save_plan
+
+        return save_plan(self, folder, overwrite=overwrite, preview=preview)
+
+
+def joint_path_length(theta: Array) -> float:
+    """Σ_k |θ_{k+1} − θ_k| (rad) of a (K, n) knot sequence."""
+    return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))
+
+
+def _ik(robot: Robot, sphere: LightSphere, target: Array, theta0: Array, problem: Problem) -> IKResult:
+    s = problem.solver
+    return generalized_ik(
+        robot, sphere, target, theta0, max_iter=s.ik_max_iter, tol=s.ik_tol, damping=s.ik_damping
+    )
+
+
+def place_landmarks(
+    problem: Problem, robot: Robot, sphere: LightSphere, landmarks: Sequence[Landmark]
+) -> tuple[list[Landmark], Array, list[str]]:
+    """Joint angles at each landmark (IK chained in the given order, retried from θ_ref).
+
+    Returns the landmarks kept, their joint angles (M, n) and warnings. Raises
+    :class:`UnreachableError` naming the first unreachable landmark unless ``allow_partial``.
+    """
+    kept, thetas, notes = [], [], []
+    previous = robot.theta_ref
+    for lm in landmarks:
+        result = _ik(robot, sphere, lm.position, previous, problem)
+        if not result.success:
+            result = _ik(robot, sphere, lm.position, robot.theta_ref, problem)
+        if not result.success:
+            where = (
+                f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
+                f"{np.rad2deg(lm.azimuth):.1f}°) is out of reach of {robot.name}: {result.message}"
+            )
+            if not problem.landmarks.allow_partial:
+                raise UnreachableError(
+                    f"{where}; move the robot base ([robot] base_position_m), shrink the zenith range "
+                    "([light_sphere] zenith_max_deg) or set [landmarks] allow_partial = true"
+                )
+            notes.append(f"dropped {where}")
+            continue
+        kept.append(lm)
+        thetas.append(result.theta)
+        previous = result.theta
+    if len(kept) < 1:
+        raise UnreachableError(f"no landmark is reachable by {robot.name}")
+    return kept, np.array(thetas), notes
+
+
+def visiting_order(problem: Problem, landmarks: Sequence[Landmark], thetas: Array) -> NDArray[np.int64]:
+    """Azimuth order, or a short open tour in joint space (``[trajectory] order``)."""
+    if problem.trajectory.order == "tour":
+        distance = np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2)
+        return shortest_open_tour(distance)
+    return azimuth_order([lm.azimuth for lm in landmarks])
+
+
+def knot_ik(
+    problem: Problem, robot: Robot, sphere: LightSphere, path: LightPath, theta_start: Array
+) -> tuple[Array, int]:
+    """Per-knot generalized IK along the path, each knot started from the previous one (the paper's
+    pipeline). Returns the (K, n) angles and the number of knots where IK did not converge."""
+    thetas = np.empty((path.n_knots, robot.n))
+    previous, failures = theta_start, 0
+    for k, position in enumerate(path.positions):
+        result = _ik(robot, sphere, position, previous, problem)
+        failures += not result.success
+        thetas[k] = previous = result.theta
+    return thetas, failures
+
+
+def solve(problem: Problem | str | Path, *, progress: Progress | None = None) -> Plan:
+    """Solve a problem (a :class:`Problem`, a file path or a built-in name) end to end.
+
+    Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
+    the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
+    shown); :meth:`Plan.save` refuses to export it.
+    """
+    problem = problem if isinstance(problem, Problem) else load_problem(problem)
+    timings: dict[str, float] = {}
+    notify = progress or (lambda stage, done, total: None)
+    t_total = time.perf_counter()
+
+    def stage(name: str) -> Callable[[], None]:
+        start = time.perf_counter()
+        notify(name, 0, 1)
+
+        def done() -> None:
+            timings[name] = time.perf_counter() - start
+            notify(name, 1, 1)
+
+        return done
+
+    done = stage("scene")
+    scene = Scene.from_problem(problem)
+    robot = load_robot(problem)
+    sphere = scene.sphere
+    done()
+
+    start = time.perf_counter()
+    landmarks = find_landmarks(problem, scene, progress=lambda d, t: notify("landmarks", d, t))
+    timings["landmarks"] = time.perf_counter() - start
+
+    done = stage("placement")
+    kept, thetas, notes = place_landmarks(problem, robot, sphere, landmarks.landmarks)
+    done()
+
+    done = stage("path")
+    order = visiting_order(problem, kept, thetas)
+    visited = tuple(kept[i] for i in order)
+    path = build_path(
+        sphere,
+        np.array([lm.position for lm in visited]),
+        np.arange(len(visited)),
+        np.deg2rad(problem.trajectory.knot_spacing_deg),
+    )
+    warm, failures = knot_ik(problem, robot, sphere, path, thetas[order[0]])
+    if failures:
+        notes.append(f"per-knot IK did not converge at {failures} of {path.n_knots} knots (NLP warm start)")
+    done()
+
+    done = stage("nlp")
+    optimizer = TrajectoryOptimizer(
+        robot,
+        path_mode=problem.trajectory.path,
+        max_step=problem.trajectory.max_step_rad,
+        max_iter=problem.solver.max_iter,
+        tol=problem.solver.tol,
+        verbose=problem.solver.verbose,
+    )
+    nlp = optimizer.solve(path, sphere, warm)
+    if not nlp.success:
+        raise SolverError(
+            f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
+            f"max |h| = {nlp.max_h_residual:.2e} m); try a smaller [trajectory] knot_spacing_deg, a "
+            'larger max_step_rad or path = "free"'
+        )
+    done()
+
+    done = stage("timing")
+    segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]
+    trajectory = time_parameterize(
+        segments,
+        robot.velocity_limit * problem.robot.velocity_scale,
+        robot.acceleration_limit,
+        problem.trajectory.dwell_s,
+        joint_names=robot.joint_names,
+    )
+    done()
+
+    done = stage("verify")
+    planned = np.array([robot.light_pose(t)[0] for t in nlp.theta])
+    report = verify_trajectory(
+        trajectory,
+        light_pose=robot.light_pose,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=robot.velocity_limit * problem.robot.velocity_scale,
+        acceleration_limit=robot.acceleration_limit,
+        sphere=sphere,
+        landmark_positions=np.array([lm.position for lm in visited]),
+        planned_path=planned,
+    )
+    done()
+    timings["total"] = time.perf_counter() - t_total
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
+    return Plan(
+        problem=problem,
+        scene=scene,
+        robot=robot,
+        landmarks=landmarks,
+        visited=visited,
+        landmark_thetas=thetas[order],
+        path=path,
+        knot_ik=warm,
+        nlp=nlp,
+        trajectory=trajectory,
+        verification=report,
+        timings=timings,
+        warnings=tuple(notes),
+    )

@@ -1,0 +1,195 @@
+"""The trajectory NLP (DESIGN §6): joint angles at every path knot, built once, solved many times.
+
+Variables θ_0 … θ_{K−1} (joint angles, rad). Constraints per knot k, with a_k, R_k the light
+position and rotation from the symbolic forward kinematics:
+
+- h(θ_k) = R_kᵀ (O − a_k) − [0, 0, b] = 0 (on the sphere, aimed at O; DESIGN §3);
+- path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
+  the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
+- landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
+- joint bounds, and |θ_{k+1} − θ_k| ≤ max_step per joint.
+
+Cost Σ_k |θ_{k+1} − θ_k|² + w Σ_k |θ_k − θ_ref|² (a small posture term settles the null space).
+The per-knot constraints are one SX function mapped over the knots, so the graph stays small.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import NDArray
+
+from optlight.errors import SolverError
+from optlight.geometry import LightSphere
+from optlight.planning.path import LightPath
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TrajectoryNLPResult:
+    """Knot configurations (K, n) and the solver's account of them."""
+
+    theta: Array
+    success: bool
+    status: str
+    cost: float
+    max_h_residual: float
+    iterations: int
+    time_s: float
+
+
+def _tangent_basis(u: Array) -> tuple[Array, Array]:
+    """Two unit vectors orthogonal to the unit vector u and to each other."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(u, helper)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(u, t1)
+
+
+class TrajectoryOptimizer:
+    """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots).
+
+    ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
+    ``theta_ref`` and ``n``. Solvers are cached, so solving many paths of the same size reuses one.
+    """
+
+    def __init__(
+        self,
+        robot: Any,
+        *,
+        path_mode: str = "arc",
+        max_step: float = 0.25,
+        posture_weight: float = 1e-3,
+        max_iter: int = 300,
+        tol: float = 1e-8,
+        verbose: bool = False,
+    ) -> None:
+        self.robot = robot
+        self.path_mode = path_mode
+        self.max_step = float(max_step)
+        self.posture_weight = float(posture_weight)
+        self.options = {
+            "ipopt.max_iter": int(max_iter),
+            "ipopt.tol": float(tol),
+            "ipopt.constr_viol_tol": 1e-9,
+            "ipopt.print_level": 5 if verbose else 0,
+            "ipopt.sb": "yes",
+            "print_time": bool(verbose),
+        }
+        self._solvers: dict[tuple[int, tuple[int, ...]], ca.Function] = {}
+        self._knot_fn = self._build_knot_function()
+
+    def _build_knot_function(self) -> ca.Function:
+        """Per-knot constraints g(θ, O, b, n, u_start, u_end, t1, t2, a*) as one SX function:
+        [h (3); plane (1); wedge (2); pin (2)]."""
+        n = self.robot.n
+        theta = ca.SX.sym("theta", n)
+        center, normal, u0, u1, t1, t2, target = (
+            ca.SX.sym(s, 3) for s in ("O", "n", "u0", "u1", "t1", "t2", "a_star")
+        )
+        radius = ca.SX.sym("b")
+        a, rot = self.robot.symbolic_light_pose(theta)
+        h = rot.T @ (center - a) - ca.vertcat(0, 0, radius)
+        d = a - center
+        plane = ca.dot(normal, d)
+        wedge = ca.vertcat(ca.dot(ca.cross(normal, u0), d), ca.dot(ca.cross(u1, normal), d))
+        pin = ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target))
+        return ca.Function(
+            "knot_constraints",
+            [theta, center, radius, normal, u0, u1, t1, t2, target],
+            [ca.vertcat(h, plane, wedge, pin)],
+        )
+
+    def _solver(self, n_knots: int, landmark_knots: tuple[int, ...]) -> ca.Function:
+        key = (n_knots, landmark_knots)
+        if key not in self._solvers:
+            self._solvers[key] = self._build_solver(n_knots, landmark_knots)
+        return self._solvers[key]
+
+    def _build_solver(self, n_knots: int, landmark_knots: tuple[int, ...]) -> ca.Function:
+        n = self.robot.n
+        theta = ca.MX.sym("theta", n, n_knots)
+        # parameters: O (3), b (1), θ_ref (n), then per knot n, u0, u1, t1, t2, a* (18 × K)
+        p = ca.MX.sym("p", 4 + n + 18 * n_knots)
+        center, radius, theta_ref = p[0:3], p[3], p[4 : 4 + n]
+        per_knot = ca.reshape(p[4 + n :], 18, n_knots)
+        mapped = self._knot_fn.map(n_knots)
+        g_all = mapped(
+            theta,
+            ca.repmat(center, 1, n_knots),
+            ca.repmat(radius, 1, n_knots),
+            per_knot[0:3, :],
+            per_knot[3:6, :],
+            per_knot[6:9, :],
+            per_knot[9:12, :],
+            per_knot[12:15, :],
+            per_knot[15:18, :],
+        )
+        h = ca.vec(g_all[0:3, :])
+        pins = ca.vec(g_all[6:8, list(landmark_knots)])
+        steps = ca.vec(theta[:, 1:] - theta[:, :-1])
+        constraints = [h, pins, steps]
+        if self.path_mode == "arc":
+            interior = [k for k in range(n_knots) if k not in set(landmark_knots)]
+            constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
+        dtheta = theta[:, 1:] - theta[:, :-1]
+        posture = theta - ca.repmat(theta_ref, 1, n_knots)
+        cost = ca.sumsqr(dtheta) + self.posture_weight * ca.sumsqr(posture)
+        nlp = {"x": ca.vec(theta), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
+        return ca.nlpsol("trajectory_nlp", "ipopt", nlp, self.options)
+
+    def bounds(self, n_knots: int, n_landmarks: int) -> tuple[Array, Array]:
+        """lbg, ubg in the order the constraints are stacked in the solver."""
+        n = self.robot.n
+        eq = np.zeros(3 * n_knots + 2 * n_landmarks)
+        step = np.full(n * (n_knots - 1), self.max_step)
+        lbg, ubg = [eq, -step], [eq, step]
+        if self.path_mode == "arc":
+            n_int = n_knots - n_landmarks
+            lbg += [np.zeros(n_int), np.zeros(2 * n_int)]
+            ubg += [np.zeros(n_int), np.full(2 * n_int, np.inf)]
+        return np.concatenate(lbg), np.concatenate(ubg)
+
+    def solve(self, path: LightPath, sphere: LightSphere, theta0: Array) -> TrajectoryNLPResult:
+        """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n)."""
+        n_knots, n = path.n_knots, self.robot.n
+        landmark_knots = tuple(int(k) for k in path.landmark_knots)
+        solver = self._solver(n_knots, landmark_knots)
+        per_knot = np.zeros((n_knots, 18))
+        for seg in path.segments():
+            u0, u1 = path.directions[seg.start], path.directions[seg.stop - 1]
+            normal = np.cross(u0, u1)
+            norm = np.linalg.norm(normal)
+            normal = normal / norm if norm > 1e-12 else _tangent_basis(u0)[0]
+            per_knot[seg, 0:3], per_knot[seg, 3:6], per_knot[seg, 6:9] = normal, u0, u1
+        for k in range(n_knots):
+            per_knot[k, 9:12], per_knot[k, 12:15] = _tangent_basis(path.directions[k])
+        per_knot[:, 15:18] = path.positions
+        p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
+        lbg, ubg = self.bounds(n_knots, len(landmark_knots))
+        lbx = np.tile(self.robot.lower, n_knots)
+        ubx = np.tile(self.robot.upper, n_knots)
+        x0 = np.clip(np.asarray(theta0, float).ravel(), lbx, ubx)
+        start = time.perf_counter()
+        out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        elapsed = time.perf_counter() - start
+        stats = solver.stats()
+        theta = np.asarray(out["x"]).reshape(n_knots, n)
+        g = np.asarray(out["g"]).ravel()
+        max_h = float(np.max(np.abs(g[: 3 * n_knots]))) if n_knots else 0.0
+        if not np.all(np.isfinite(theta)):
+            raise SolverError(f"trajectory NLP returned non-finite joint angles ({stats['return_status']})")
+        return TrajectoryNLPResult(
+            theta=theta,
+            success=bool(stats["success"]),
+            status=str(stats["return_status"]),
+            cost=float(out["f"]),
+            max_h_residual=max_h,
+            iterations=int(stats["iter_count"]),
+            time_s=elapsed,
+        )
