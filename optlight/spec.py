@@ -244,7 +244,7 @@ class LandmarksSpec:
     )
     seeds: int = key(3, "sweep minima refined by IPOPT per azimuth", lo=1, hi=50)
     resolution: int = key(
-        96,
+        64,
         "longer image side of the search renders (the camera's when smaller); reported costs use the camera's",
         unit="px",
         lo=8,
@@ -294,6 +294,98 @@ class SolverSpec:
 
 
 @dataclass(frozen=True)
+class BoxSpec:
+    """A box obstacle: centre, edge lengths along its own axes, orientation."""
+
+    name: str = key("box", "name in reports (unique in the environment)")
+    center_m: Vec3 = key((0.0, 0.0, 0.0), "box centre in the world frame", unit="m")
+    size_m: Vec3 = key(
+        (0.1, 0.1, 0.1), "edge lengths along the box's x, y, z axes", unit="m", lo=0.0, lo_open=True
+    )
+    rpy_deg: Vec3 = key((0.0, 0.0, 0.0), "roll, pitch, yaw of the box axes in the world frame", unit="deg")
+
+
+@dataclass(frozen=True)
+class CylinderSpec:
+    """A cylinder obstacle: axis along its own z, centred at ``center_m``."""
+
+    name: str = key("cylinder", "name in reports (unique in the environment)")
+    center_m: Vec3 = key((0.0, 0.0, 0.0), "cylinder centre (middle of its axis) in the world frame", unit="m")
+    radius_m: float = key(0.05, "cylinder radius", unit="m", lo=0.0, lo_open=True)
+    length_m: float = key(0.3, "cylinder length along its axis", unit="m", lo=0.0, lo_open=True)
+    rpy_deg: Vec3 = key(
+        (0.0, 0.0, 0.0), "roll, pitch, yaw of the cylinder axes in the world frame (axis = z)", unit="deg"
+    )
+
+
+@dataclass(frozen=True)
+class SphereSpec:
+    """A sphere obstacle."""
+
+    name: str = key("sphere", "name in reports (unique in the environment)")
+    center_m: Vec3 = key((0.0, 0.0, 0.0), "sphere centre in the world frame", unit="m")
+    radius_m: float = key(0.05, "sphere radius", unit="m", lo=0.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class EnvironmentSpec:
+    """What surrounds the robot: a table, the camera body and stand, the object's bounding sphere,
+    extra boxes, cylinders and spheres; the robot's own links; the camera's view of the object. Off
+    by default: with ``enabled = false`` none of it is modelled, constrained or checked."""
+
+    enabled: bool = key(False, "model the environment: clearance and view-cone constraints, exact checks")
+    margin_m: float = key(
+        0.02, "smallest allowed distance between the robot (light included) and an obstacle", unit="m", lo=0.0
+    )
+    self_margin_m: float = key(
+        0.01, "smallest allowed distance between two robot links that can come close", unit="m", lo=0.0
+    )
+    table_height_m: float | None = key(
+        None, "world z of the table top; everything below it is solid (unset: no table)", unit="m"
+    )
+    object_radius_m: float | None = key(
+        None,
+        "radius of the object's bounding sphere around O (default: its farthest point from O)",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    camera_body: bool = key(True, "the camera body and its stand are obstacles")
+    camera_body_size_m: Vec3 = key(
+        (0.10, 0.08, 0.12),
+        "camera body width, height, depth: a box behind the camera centre, in camera axes",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    camera_stand_radius_m: float = key(
+        0.02,
+        "radius of the stand, a vertical cylinder from the body down to the table (or to z = 0)",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+    )
+    light_radius_m: float = key(
+        0.03, "radius of the light housing, a cylinder behind the light frame (along −z)", unit="m", lo=0.0, lo_open=True
+    )
+    light_length_m: float = key(0.08, "length of the light housing", unit="m", lo=0.0, lo_open=True)
+    view_cone: Literal["off", "capture", "path"] = key(
+        "capture",
+        "keep the robot and the light out of the camera's view of the object at capture times, "
+        "along the whole path, or nowhere",
+    )
+    view_margin_deg: float = key(
+        2.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0
+    )
+    spheres_per_link: int = key(
+        3, "most spheres fitted to one link's collision geometry (the NLPs' approximation)", lo=1, hi=16
+    )
+    boxes: tuple[BoxSpec, ...] = key((), "box obstacles, as [[environment.boxes]] tables")
+    cylinders: tuple[CylinderSpec, ...] = key((), "cylinder obstacles, as [[environment.cylinders]] tables")
+    spheres: tuple[SphereSpec, ...] = key((), "sphere obstacles, as [[environment.spheres]] tables")
+
+
+@dataclass(frozen=True)
 class Problem:
     """A whole light-positioning problem."""
 
@@ -307,6 +399,7 @@ class Problem:
     landmarks: LandmarksSpec = section(LandmarksSpec, "the landmark search")
     trajectory: TrajectorySpec = section(TrajectorySpec, "path, timing and export")
     solver: SolverSpec = section(SolverSpec, "numerical settings")
+    environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property
@@ -521,15 +614,53 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+    if p.environment.enabled:
+        _check_environment(p, file)
+
+
+def _check_environment(p: Problem, file: str) -> None:
+    """Obstacle names unique and not reserved, no obstacle holding O or the camera centre, the table
+    below both, the camera above the floor its stand ends on."""
+    from optlight.environment import RESERVED_NAMES, listed_obstacles  # local: it depends on this module
+
+    env = p.environment
+    seen: set[str] = set()
+    center = np.asarray(p.object.center_m, float)
+    eye = np.asarray(p.camera.position_m, float)
+    for where, obstacle in listed_obstacles(env):
+        if obstacle.name in RESERVED_NAMES or obstacle.name in seen:
+            raise ProblemError(
+                file,
+                f"{where}.name",
+                f"a name no other obstacle has (reserved: {', '.join(RESERVED_NAMES)})",
+                obstacle.name,
+            )
+        seen.add(obstacle.name)
+        for point, what in ((center, "the object centre"), (eye, "the camera centre")):
+            if obstacle.signed_distance(point)[0] <= 0.0:
+                raise ProblemError(file, where, f"an obstacle that does not contain {what} {list(point)}")
+    floor = env.table_height_m
+    if floor is not None and center[2] <= floor:
+        raise ProblemError(
+            file, "environment.table_height_m", f"a table below the object centre (z = {center[2]:g} m)", floor
+        )
+    if env.camera_body and eye[2] <= (floor if floor is not None else 0.0):
+        raise ProblemError(
+            file,
+            "camera.position_m",
+            "a camera above the table (or above z = 0 without a table), where its stand ends",
+            list(p.camera.position_m),
+        )
 
 
 def _to_plain(value: Any) -> Any:
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        # Unset (None) keys are left out: TOML has no null, and a missing key means its default.
+        # Unset (None) keys and empty lists are left out: TOML has no null, a missing key means its
+        # default, and no key whose default is non-empty accepts an empty list.
         return {
             f.name: _to_plain(getattr(value, f.name))
             for f in dataclasses.fields(value)
-            if not f.metadata.get("internal") and getattr(value, f.name) is not None
+            if not f.metadata.get("internal") and getattr(value, f.name) not in (None, ())
         }
     if isinstance(value, tuple):
         return [_to_plain(v) for v in value]

@@ -1,0 +1,121 @@
+"""The whole pipeline on a reduced default problem: solve, verify, export, refuse, unreachable."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import optlight
+from optlight.errors import UnreachableError, VerificationError
+from optlight.geometry import h_residual
+from optlight.pipeline import joint_path_length
+from optlight.planning.timing import Trajectory
+from optlight.spec import load_problem, problem_from_dict
+from optlight.verify import verify_trajectory
+
+
+def small_problem(**overrides: dict) -> optlight.Problem:
+    """The default problem with 8 landmarks and a 96² camera, so the whole pipeline runs in seconds."""
+    data = load_problem("default").to_dict()
+    data["camera"].update(width=96, height=96)
+    data["landmarks"].update(count=8)
+    for section, values in overrides.items():
+        data[section].update(values)
+    return problem_from_dict(data, source=load_problem("default").source)
+
+
+@pytest.fixture(scope="module")
+def plan() -> optlight.Plan:
+    return optlight.solve(small_problem())
+
+
+def test_plan_meets_the_light_constraints_and_limits(plan: optlight.Plan) -> None:
+    robot, sphere = plan.robot, plan.scene.sphere
+    assert plan.nlp.success and plan.verification.passed
+    assert all(robot.within_limits(theta) for theta in plan.landmark_thetas)
+    for k, theta in zip(plan.path.landmark_knots, plan.nlp.theta[plan.path.landmark_knots], strict=True):
+        p, r = robot.light_pose(theta)  # pinocchio, independent of the CasADi mirror the NLP used
+        assert np.abs(h_residual(p, r, sphere.center, sphere.radius)).max() < 1e-8
+        np.testing.assert_allclose(p, plan.path.positions[k], atol=1e-8)
+    # the NLP never lengthens the joint path of the per-knot IK it starts from
+    assert joint_path_length(plan.nlp.theta) <= joint_path_length(plan.knot_ik) + 1e-9
+    # one capture per landmark, the light still during each dwell
+    traj = plan.trajectory
+    assert traj.capture_times.size == len(plan.visited)
+    _, qd, _ = traj.sample(traj.capture_times)
+    np.testing.assert_allclose(qd, 0.0, atol=1e-9)
+
+
+def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> None:
+    folder = tmp_path / "out"
+    plan.save(folder, preview=False)
+    names = {p.name for p in folder.iterdir()}
+    assert {"trajectory.csv", "plan.json", "lights.lp", "trajectory.png", "path.png", "report.md"} <= names
+    assert "landmarks_polar.png" in names
+    doc = json.loads((folder / "plan.json").read_text())
+    assert doc["verification"]["passed"] is True
+    assert len(doc["landmarks"]) == len(plan.visited)
+    assert set(doc["files"]) == names
+    lp = (folder / "lights.lp").read_text().splitlines()
+    assert int(lp[0]) == len(plan.visited) and len(lp) == len(plan.visited) + 1
+    # the .lp direction of each capture is the landmark's direction, in the PTM camera convention
+    for line, lm in zip(lp[1:], plan.visited, strict=True):
+        d = np.array(line.split()[1:], float)
+        u = plan.scene.camera.to_camera_frame(
+            (lm.position - plan.scene.sphere.center) / plan.scene.sphere.radius
+        )
+        np.testing.assert_allclose(d, u * [1, -1, -1], atol=1e-6)
+    # CSV round trip: the file reproduces the trajectory at its samples
+    back = Trajectory.from_csv(folder / "trajectory.csv")
+    t = np.linspace(0, plan.trajectory.duration, 57)
+    np.testing.assert_allclose(back.sample(t)[0], plan.trajectory.sample(t)[0], atol=2e-3)
+    report = (folder / "report.md").read_text()
+    assert "verification | passed" in report and "![path](path.png)" in report
+
+
+def test_a_compressed_trajectory_is_refused(plan: optlight.Plan, tmp_path: Path) -> None:
+    robot = plan.robot
+    fast = plan.trajectory.time_scaled(0.5)
+    report = verify_trajectory(
+        fast,
+        light_pose=robot.light_pose,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=robot.velocity_limit,
+        acceleration_limit=robot.acceleration_limit,
+        sphere=plan.scene.sphere,
+        landmark_positions=np.array([lm.position for lm in plan.visited]),
+    )
+    assert not report.passed
+    assert "acceleration" in report.counts and report.counts["acceleration"] > 0
+    bad = dataclasses.replace(plan, trajectory=fast, verification=report)
+    with pytest.raises(VerificationError, match="failed verification"):
+        bad.save(tmp_path / "bad", preview=False)
+    assert not any(tmp_path.iterdir()), "nothing may be written for a failing plan"
+
+
+#: A base 0.9 m below the light ring, on the camera side: the lower landmarks are within reach, the upper
+#: ones are not (checked with the IK when this was written).
+LOW_BASE = [-0.603, -0.55, -0.45]
+
+
+def test_unreachable_landmark_is_named() -> None:
+    far = small_problem(robot={"base_position_m": LOW_BASE})
+    with pytest.raises(UnreachableError, match=r"landmark \d+ \(zenith .*°, azimuth .*°\) is out of reach"):
+        optlight.solve(far)
+
+
+def test_partial_plans_drop_unreachable_landmarks_with_a_warning() -> None:
+    far = small_problem(robot={"base_position_m": LOW_BASE}, landmarks={"allow_partial": True})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan = optlight.solve(far)
+    dropped = [w for w in plan.warnings if "out of reach" in w]
+    assert dropped and 0 < len(plan.visited) == 8 - len(dropped)
+    assert any("out of reach" in str(w.message) for w in caught)
+    assert plan.verification.passed
