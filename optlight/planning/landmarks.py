@@ -39,7 +39,7 @@ Resolution. The search (sweeps, NLPs, candidate scores) renders at ``landmarks.r
 longer image side, the camera's aspect kept; the camera's own resolution when that is smaller); the
 reported costs and histograms use the camera's resolution. The soft histogram of a downsampled image
 is close to the full-resolution one, so the minimisers move little (step 5 takes care of the rest)
-while every evaluation gets cheaper by the pixel ratio (256² -> 96²: ~7×).
+while every evaluation gets cheaper by the pixel ratio (default 64 px against the 256² camera: 16×).
 
 Angles are radians in code, degrees only in reports. Lengths are metres.
 """
@@ -384,12 +384,11 @@ class _Search:
             mask = new_mask
         return candidate, iterations, first_status
 
-    def polish(self, start: _Candidate) -> _Candidate:
+    def polish(self, start: _Candidate, mask: Array) -> _Candidate:
         """Bounded Brent minimisation of the objective at the camera's resolution over the zenith,
-        within :data:`POLISH_HALF_WIDTH` of ``start`` along its azimuth, the visibility mask fixed at
-        ``start`` (the result is scored with shadow rays by :meth:`finish`)."""
+        within :data:`POLISH_HALF_WIDTH` of ``start`` along its azimuth, with the visibility ``mask``
+        (P,) of ``start`` held fixed (the result is scored with its own shadow rays by :meth:`finish`)."""
         azimuth = start.azimuth
-        mask = self.scene.visibility(self.sphere.position(start.zenith, azimuth))
 
         def cost(zenith: float) -> float:
             return self.objective.numpy(self.scene.pixels(self.sphere.position(zenith, azimuth), mask))
@@ -406,15 +405,20 @@ class _Search:
         search resolution. When the search ran at a lower resolution, both (and, with ``polish``, the
         result of :meth:`polish` from the best) are scored again at the camera's, shadow rays
         included, and the lowest wins."""
-        candidates = [best]
-        if self.search is not self.scene:
-            candidates = list(dict.fromkeys((sample, best)))
+
+        def score(c: _Candidate, mask: Array | None = None) -> tuple[float, Array, _Candidate]:
+            pixels = self.scene.pixels(self.sphere.position(c.zenith, c.azimuth), mask)
+            return self.objective.numpy(pixels), pixels, c
+
+        if self.search is self.scene:
+            scored = [score(best)]
+        else:
+            mask = self.scene.visibility(self.sphere.position(best.zenith, best.azimuth))
+            scored = [score(best, mask)]
+            if sample != best:
+                scored.append(score(sample))
             if polish:
-                candidates.append(self.polish(best))
-        scored = []
-        for c in candidates:
-            pixels = self.scene.pixels(self.sphere.position(c.zenith, c.azimuth))
-            scored.append((self.objective.numpy(pixels), pixels, c))
+                scored.append(score(self.polish(best, mask)))
         cost, pixels, winner = min(scored, key=lambda s: s[0])
         azimuth = float(np.mod(winner.azimuth, 2 * np.pi))
         lm = Landmark(
