@@ -14,7 +14,8 @@ import pytest
 from optlight.errors import RobotError
 from optlight.geometry import LightSphere, sphere_frame
 from optlight.robot import SUPPORTED_ROBOTS, Robot, light_angles, light_residual, load_robot
-from optlight.robot.loading import ROBOTS, example_robot_data_dir, placement
+from optlight.robot.kinematics import symbolic_frame_pose
+from optlight.robot.loading import ROBOTS, JointCoordinates, example_robot_data_dir, placement
 from optlight.spec import RobotSpec, load_problem, problem_from_dict
 
 N_CONFIGS = 200
@@ -223,3 +224,46 @@ def test_light_angles_follow_the_sphere_convention() -> None:
     zenith, azimuth = light_angles(r, sphere, r.theta_ref)
     z_ref, a_ref = sphere.angles(r.light_pose(r.theta_ref)[0])
     assert np.isclose(zenith, z_ref) and np.isclose(azimuth, a_ref)
+
+
+def _chain_urdf(rng: np.random.Generator) -> str:
+    """A URDF chain with every joint type optlight handles, unaligned axes included."""
+    specs = [
+        ("revolute", "0.267 0.535 0.802"),  # unaligned revolute
+        ("continuous", "1 0 0"),
+        ("prismatic", "0.6 0 0.8"),  # unaligned prismatic
+        ("revolute", "0 1 0"),
+        ("continuous", "0 0.6 0.8"),  # unaligned continuous
+        ("prismatic", "0 0 1"),
+        ("continuous", "0 0 1"),
+    ]
+    links = "".join(f'<link name="l{k}"/>' for k in range(len(specs) + 1))
+    joints = ""
+    for k, (kind, axis) in enumerate(specs):
+        xyz = " ".join(f"{x:.3f}" for x in rng.normal(size=3) * 0.2)
+        rpy = " ".join(f"{x:.3f}" for x in rng.uniform(-3, 3, size=3))
+        limit = '<limit lower="-2" upper="2" effort="1" velocity="1"/>' if kind != "continuous" else ""
+        joints += (
+            f'<joint name="j{k}" type="{kind}"><parent link="l{k}"/><child link="l{k + 1}"/>'
+            f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>'
+        )
+    return f'<robot name="chain">{links}{joints}</robot>'
+
+
+def test_casadi_kinematics_handles_every_joint_type() -> None:
+    """Unaligned revolute/prismatic/continuous axes and continuous joints, from a URDF."""
+    rng = np.random.default_rng(7)
+    model = pin.buildModelFromXML(_chain_urdf(rng))
+    kinds = {j.shortname() for j in model.joints[1:]}
+    assert {"JointModelRevoluteUnaligned", "JointModelPrismaticUnaligned", "JointModelRUBX"} <= kinds
+    assert "JointModelRevoluteUnboundedUnaligned" in kinds
+    tip = model.addFrame(pin.Frame("tip", model.njoints - 1, pin.SE3.Random(), pin.FrameType.OP_FRAME))
+    coords = JointCoordinates(model)
+    assert model.nq == 10 and model.nv == 7
+    fk = symbolic_frame_pose(model, tip)
+    data = model.createData()
+    for theta in rng.uniform(-3, 3, size=(50, 7)):
+        pin.framesForwardKinematics(model, data, coords.to_pin(theta))
+        p, rot = fk(theta)
+        assert np.abs(np.array(p).ravel() - data.oMf[tip].translation).max() < 1e-12
+        assert np.abs(np.array(rot) - data.oMf[tip].rotation).max() < 1e-12

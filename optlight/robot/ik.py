@@ -6,7 +6,7 @@ One iteration, with e and J from the primary task (:mod:`optlight.robot.tasks`) 
 
 J⁺ = Jᵀ (J Jᵀ + εI)⁻¹ (ε = 1e-12) makes I − J⁺J the null-space projector: the paper's formula with
 an undamped projector, so the secondary tasks never disturb the primary one (:func:`null_space_step`).
-λ² = λ₀² + 0.1 |e|²: Levenberg–Marquardt damping that shrinks with the error, so the last iterations
+λ² = λ₀² + 0.03 |e|²: Levenberg–Marquardt damping that shrinks with the error, so the last iterations
 are Gauss–Newton and converge quadratically (λ₀² = ``damping``, [solver] ik_damping).
 
 Joint limits: a joint at a limit whose step points outwards is frozen for that iteration (its column
@@ -14,8 +14,8 @@ of J and its γ entry are zeroed and the step recomputed); every iterate is clip
 [lower, upper]; the step is scaled so that max_i |δθ_i| ≤ ``max_step``.
 
 When the error stops decreasing (a local minimum of |e|, typically against joint limits or on the
-wrong elbow/wrist branch) the solver restarts from a seeded random configuration, within the same
-iteration budget. Success means |e|² < ``tol`` *and* θ within the limits, checked explicitly on the
+wrong elbow/wrist branch) the solver restarts from the best (smallest |e|) of 8 seeded random
+configurations, within the same iteration budget. Success means |e|² < ``tol`` *and* θ within the limits, checked explicitly on the
 returned θ.
 """
 
@@ -24,7 +24,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,8 +44,23 @@ from optlight.spec import SolverSpec
 
 Array = NDArray[np.float64]
 
-#: Default null-space gains k per secondary task (see :mod:`optlight.robot.tasks`).
-DEFAULT_GAINS: dict[str, float] = {"joint_limits": 0.05, "manipulability": 0.01, "posture": 0.02}
+_SPEC = SolverSpec()
+
+#: Null-space gains k of the secondary tasks named without a weight (see :mod:`optlight.robot.tasks`).
+DEFAULT_GAINS: dict[str, float] = {
+    "joint_limits": _SPEC.ik_joint_limit_gain,
+    "manipulability": 0.01,
+    "posture": 0.02,
+}
+
+#: Levenberg–Marquardt factor c in λ² = λ₀² + c |e|² (tuned on benchmarks/bench_ik.py).
+_LM = 0.03
+#: ε of the null-space projector J⁺ = Jᵀ (J Jᵀ + ε I)⁻¹.
+_EPS = 1e-12
+#: Random configurations drawn per restart; the one with the smallest |e|² is the new start.
+_CANDIDATES = 8
+_EYE = {m: np.eye(m) for m in range(1, 7)}
+_EPS_EYE = {m: _EPS * np.eye(m) for m in range(1, 7)}
 
 
 @dataclass(frozen=True)
@@ -72,28 +87,40 @@ def null_space_step(jacobian: Array, error: Array, gamma: Array | None, damping:
     J⁺ = Jᵀ (J Jᵀ + ε I)⁻¹ with ε = 1e-12 (the null-space projector, exact up to ε).
 
     The projector is not damped, so the γ part moves θ in the null space of J (the primary task is
-    unchanged to first order) however large λ is. ``gamma=None`` means γ = 0. Two m×m LAPACK solves.
+    unchanged to first order) however large λ is. ``gamma=None`` means γ = 0. Two m×m LAPACK solves
+    (``gesv``: ~1 µs each where numpy's ``solve`` takes ~3 µs).
     """
     a = jacobian @ jacobian.T
-    diag = _DIAG[a.shape[0]]
-    x = _solve(a + damping * diag, error)
+    m = len(a)
+    x = _solve(a + damping * _EYE[m], error)
     if gamma is None:
-        return np.asarray(jacobian.T @ x, float)
-    return np.asarray(gamma + jacobian.T @ (x - _solve(a + _EPS * diag, jacobian @ gamma)), float)
-
-
-_EPS = 1e-12
-#: Levenberg–Marquardt factor c in λ² = λ₀² + c |e|² (m⁻²·m² = 1; tuned on bench_ik).
-_LM = 0.1
-_DIAG = {m: np.eye(m) for m in range(1, 7)}
+        return cast(Array, jacobian.T @ x)
+    return cast(Array, gamma + jacobian.T @ (x - _solve(a + _EPS_EYE[m], jacobian @ gamma)))
 
 
 def _solve(a: Array, b: Array) -> Array:
-    """x = a⁻¹ b for a small symmetric positive definite a (LAPACK gesv: ~1 µs, numpy's solve ~3 µs)."""
-    x, info = _gesv(a, b)[2:]
+    """x = a⁻¹ b for a small symmetric positive definite a."""
+    _, _, x, info = _gesv(a, b)
     if info != 0:  # singular: only when J has no usable column and λ = 0
-        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0], float)
-    return np.asarray(x, float)
+        return cast(Array, np.linalg.lstsq(a, b, rcond=None)[0])
+    return cast(Array, x)
+
+
+def _limit_side(theta: Array, lower: Array, upper: Array) -> Array | None:
+    """+1 where θ ≥ upper, −1 where θ ≤ lower, 0 elsewhere; None when no joint is at a limit."""
+    side = cast(Array, (theta >= upper) * 1.0 - (theta <= lower))
+    return side if side.any() else None
+
+
+def _restart(robot: Robot, primary: PrimaryTask, rng: np.random.Generator, candidates: int) -> Array:
+    """The best of ``candidates`` random configurations within the limits, by primary error |e|²."""
+    best, best_e2 = robot.theta_ref, np.inf
+    for theta in robot.random_configuration(rng, candidates):
+        e, _ = primary.error_and_jacobian(KinematicState.compute(robot, theta))
+        e2 = float(e @ e)
+        if e2 < best_e2:
+            best, best_e2 = theta, e2
+    return best
 
 
 def make_primary_task(
@@ -149,9 +176,6 @@ def ik_settings(solver: SolverSpec) -> dict[str, Any]:
     }
 
 
-_SPEC = SolverSpec()
-
-
 def generalized_ik(
     robot: Robot,
     sphere: LightSphere,
@@ -176,7 +200,9 @@ def generalized_ik(
     (position + optical axis, roll free), "6d" (also the roll: ``rotation`` R*, default the aim
     rotation of :class:`LightPoseTask`) or a task object. ``theta0``: start (default θ_ref).
     ``secondary``/``weights``: null-space objectives and their gains. ``tol``: on |e|² (m²).
-    ``patience``: iterations without a 1 % improvement before a random restart (``restarts``).
+    ``patience``: iterations without a 2 % decrease of |e|² before a restart (``restarts``) from the
+    best of 8 seeded random configurations; pass ``restarts=False`` to stay near ``theta0`` (path
+    following).
     Never raises for an unreachable target: returns ``success=False`` with the closest θ found.
     """
     t_start = time.perf_counter()
@@ -189,7 +215,7 @@ def generalized_ik(
     best_theta, best_e2 = theta, np.inf
     run_best, stall, n_restarts = np.inf, 0, 0
     rng: np.random.Generator | None = None
-    e2 = np.inf
+    side = _limit_side(theta, lower, upper)  # −1 / +1 where θ sits on its lower / upper limit
     iterations = 0
     for iterations in range(1, max_iter + 1):  # noqa: B007 - the count is reported
         state = KinematicState.compute(robot, theta)
@@ -197,17 +223,17 @@ def generalized_ik(
         e2 = float(e @ e)
         if e2 < best_e2:
             best_theta, best_e2 = theta, e2
-        if e2 < tol:
-            break
+            if e2 < tol:
+                break
         if e2 < 0.98 * run_best:
             run_best, stall = e2, 0
         else:
             stall += 1
-        if restarts and stall >= patience:
-            rng = rng if rng is not None else np.random.default_rng(seed)
-            theta = robot.random_configuration(rng)
-            run_best, stall, n_restarts = np.inf, 0, n_restarts + 1
-            continue
+            if restarts and stall >= patience:
+                rng = rng if rng is not None else np.random.default_rng(seed)
+                theta, side = _restart(robot, primary, rng, _CANDIDATES), None
+                run_best, stall, n_restarts = np.inf, 0, n_restarts + 1
+                continue
 
         gamma = None
         for obj in objectives:
@@ -215,18 +241,21 @@ def generalized_ik(
             gamma = g if gamma is None else gamma + g
         lam2 = damping + _LM * e2
         step = null_space_step(jac, e, gamma, lam2)
-        blocked = ((theta <= lower) & (step < 0.0)) | ((theta >= upper) & (step > 0.0))
-        if blocked.any():
-            jac = jac.copy()
-            jac[:, blocked] = 0.0
-            if gamma is not None:
-                gamma[blocked] = 0.0
-            step = null_space_step(jac, e, gamma, lam2)
-            step[blocked] = 0.0
+        if side is not None:
+            blocked = side * step > 0.0  # pushing outwards at a limit
+            if blocked.any():
+                jac = jac.copy()
+                jac[:, blocked] = 0.0
+                if gamma is not None:
+                    gamma[blocked] = 0.0
+                step = null_space_step(jac, e, gamma, lam2)
+                step[blocked] = 0.0
         biggest = float(np.abs(step).max())
         if biggest > max_step:
             step *= max_step / biggest
-        theta = np.minimum(np.maximum(theta + step, lower), upper)
+        free = theta + step
+        theta = np.minimum(np.maximum(free, lower), upper)
+        side = _limit_side(free, lower, upper) if (theta != free).any() else None
     else:
         state = KinematicState.compute(robot, theta)
         e, _ = primary.error_and_jacobian(state)

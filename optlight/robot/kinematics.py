@@ -32,20 +32,27 @@ Array = NDArray[np.float64]
 
 _AXES = {"X": np.array([1.0, 0.0, 0.0]), "Y": np.array([0.0, 1.0, 0.0]), "Z": np.array([0.0, 0.0, 1.0])}
 
+#: pinocchio joint types optlight handles: 1-DoF revolute, prismatic, and continuous (q = cos, sin).
+REVOLUTE_JOINTS = frozenset({"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"})
+PRISMATIC_JOINTS = frozenset({"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"})
+CONTINUOUS_JOINTS = frozenset(
+    {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned"}
+)
 
-def _axis(joint: pin.JointModel) -> tuple[str, Array]:
-    """("revolute" | "prismatic", unit axis in the joint frame) of a 1-DoF joint (any pinocchio type)."""
-    kind = joint.shortname()
-    suffix = kind.removeprefix("JointModel")
-    if suffix in ("RX", "RY", "RZ", "RUBX", "RUBY", "RUBZ"):
-        return "revolute", _AXES[suffix[-1]]
-    if suffix in ("PX", "PY", "PZ"):
-        return "prismatic", _AXES[suffix[-1]]
-    if suffix in ("RevoluteUnaligned", "RevoluteUnboundedUnaligned"):
-        return "revolute", np.asarray(joint.extract().axis, float)
-    if suffix == "PrismaticUnaligned":
-        return "prismatic", np.asarray(joint.extract().axis, float)
-    raise RobotError(f"the CasADi kinematics does not handle joint type {kind}")
+
+def _axis(model: pin.Model, joint: pin.JointModel) -> tuple[str, Array]:
+    """("revolute" | "prismatic", unit axis in the joint frame) of a supported joint, read from its
+    motion subspace S = (linear, angular) (constant for these joints)."""
+    if joint.shortname() in PRISMATIC_JOINTS:
+        kind = "prismatic"
+    elif joint.shortname() in REVOLUTE_JOINTS | CONTINUOUS_JOINTS:
+        kind = "revolute"
+    else:
+        raise RobotError(f"the CasADi kinematics does not handle joint type {joint.shortname()}")
+    data = joint.createData()
+    joint.calc(data, pin.neutral(model))
+    s = np.asarray(data.S, float).ravel()
+    return kind, s[3:] if kind == "revolute" else s[:3]
 
 
 def _rotation(axis: Array, angle: ca.SX) -> ca.SX:
@@ -61,20 +68,20 @@ def _rotation(axis: Array, angle: ca.SX) -> ca.SX:
     return ca.DM.eye(3) + s * k + (1 - c) * ca.DM(pin.skew(axis) @ pin.skew(axis))
 
 
-def symbolic_frame_pose(robot: Robot, frame_id: int, name: str = "frame_pose") -> ca.Function:
-    """``casadi.Function(name, [theta (n×1)], [p (3×1), R (3×3)])``: world placement of a frame.
+def symbolic_frame_pose(model: pin.Model, frame_id: int, name: str = "frame_pose") -> ca.Function:
+    """``casadi.Function(name, [theta (nv×1)], [p (3×1), R (3×3)])``: world placement of a frame of
+    ``model``, θ in joint-angle coordinates (one per joint, θ_j = theta[idx_v(j)]).
 
-    Only the joints that support the frame enter the graph; θ is in the robot's angle coordinates.
+    Only the joints that support the frame enter the graph.
     """
-    model = robot.model
-    theta = ca.SX.sym("theta", robot.n)
+    theta = ca.SX.sym("theta", model.nv)
     frame = model.frames[frame_id]
     chain = [int(j) for j in model.supports[frame.parentJoint]][1:]
     rot: dict[int, ca.SX] = {0: ca.SX.eye(3)}
     pos: dict[int, ca.SX] = {0: ca.SX.zeros(3, 1)}
     for j in chain:
         joint = model.joints[j]
-        kind, axis = _axis(joint)
+        kind, axis = _axis(model, joint)
         place = model.jointPlacements[j]
         parent = model.parents[j]
         r_place = rot[parent] @ ca.DM(place.rotation)

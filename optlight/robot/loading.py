@@ -51,6 +51,12 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import RobotError
+from optlight.robot.kinematics import (
+    CONTINUOUS_JOINTS,
+    PRISMATIC_JOINTS,
+    REVOLUTE_JOINTS,
+    symbolic_frame_pose,
+)
 from optlight.spec import Problem, RobotSpec
 
 if TYPE_CHECKING:
@@ -127,10 +133,6 @@ ROBOTS: dict[str, RobotInfo] = {
     ),
 }
 
-_REVOLUTE = {"JointModelRX", "JointModelRY", "JointModelRZ", "JointModelRevoluteUnaligned"}
-_PRISMATIC = {"JointModelPX", "JointModelPY", "JointModelPZ", "JointModelPrismaticUnaligned"}
-_CONTINUOUS = {"JointModelRUBX", "JointModelRUBY", "JointModelRUBZ", "JointModelRevoluteUnboundedUnaligned"}
-
 
 def example_robot_data_dir() -> Path:
     """The ``share`` folder of the installed example-robot-data wheel (its ``package://`` root)."""
@@ -161,7 +163,7 @@ class JointCoordinates:
         self.nq, self.n = int(model.nq), int(model.nv)
         self.names: list[str] = [model.names[j.id] for j in joints]
         self.kinds: list[str] = [j.shortname() for j in joints]
-        self.continuous = np.array([k in _CONTINUOUS for k in self.kinds], bool)
+        self.continuous = np.array([k in CONTINUOUS_JOINTS for k in self.kinds], bool)
         self.idx_q = np.array([j.idx_q for j in joints], int)
         self._v_angle = np.flatnonzero(~self.continuous)
         self._q_angle = self.idx_q[~self.continuous]
@@ -260,7 +262,7 @@ class Robot:
     def within_limits(self, theta: ArrayLike, tol: float = 1e-9) -> bool:
         """Whether lower − tol ≤ θ ≤ upper + tol for every joint."""
         theta = np.asarray(theta, float)
-        return bool(np.all(theta >= self.lower - tol) and np.all(theta <= self.upper + tol))
+        return bool((theta >= self.lower - tol).all() and (theta <= self.upper + tol).all())
 
     def random_configuration(self, rng: np.random.Generator, size: int | None = None) -> Array:
         """Joint angles drawn uniformly within the limits; shape (n,) or (size, n)."""
@@ -295,9 +297,7 @@ class Robot:
     def symbolic_light_pose(self) -> casadi.Function:
         """CasADi ``light_pose``: θ (n×1) → (a_L (3×1), R_WL (3×3)); built once, then cached."""
         if self._symbolic is None:
-            from optlight.robot.kinematics import symbolic_frame_pose
-
-            self._symbolic = symbolic_frame_pose(self, self.light_frame_id, name="light_pose")
+            self._symbolic = symbolic_frame_pose(self.model, self.light_frame_id, name="light_pose")
         return self._symbolic
 
     # ---------------------------------------------------------------- geometry
@@ -409,7 +409,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
     bad = [
         f"{model.names[j.id]} ({j.shortname()})"
         for j in model.joints[1:]
-        if j.shortname() not in _REVOLUTE | _PRISMATIC | _CONTINUOUS
+        if j.shortname() not in REVOLUTE_JOINTS | PRISMATIC_JOINTS | CONTINUOUS_JOINTS
     ]
     if bad:
         raise RobotError(

@@ -19,8 +19,7 @@ Secondary objectives H(θ) are minimised in the null space of the primary task (
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -35,19 +34,23 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_LOCAL = pin.ReferenceFrame.LOCAL
 
 
-@dataclass(frozen=True)
-class KinematicState:
-    """Light pose and Jacobian at θ: a_L (3,) m, R_WL (3, 3), J (6, n) LOCAL_WORLD_ALIGNED.
+class KinematicState(NamedTuple):
+    """Light pose and Jacobians at θ: a_L (3,) m, R_WL (3, 3), ``jacobian`` (6, n) LOCAL_WORLD_ALIGNED
+    (velocity of the light's origin and angular velocity, world axes) and ``local_jacobian`` (6, n)
+    LOCAL (the same twist in the light frame: its angular rows are R_WLᵀ J_ω).
 
-    Holding one means the kinematics is up to date (built by :meth:`compute`).
+    Holding one means the kinematics is up to date (built by :meth:`compute`); a NamedTuple, cheap to
+    make once per IK iteration.
     """
 
     theta: Array
     position: Array
     rotation: Array
     jacobian: Array
+    local_jacobian: Array
 
     @classmethod
     def compute(cls, robot: Robot, theta: Array) -> KinematicState:
@@ -56,7 +59,8 @@ class KinematicState:
         pin.computeJointJacobians(robot.model, robot.data, q)
         m = pin.updateFramePlacement(robot.model, robot.data, robot.light_frame_id)
         jac = pin.getFrameJacobian(robot.model, robot.data, robot.light_frame_id, _LWA)
-        return cls(theta, m.translation, m.rotation, jac)
+        local = pin.getFrameJacobian(robot.model, robot.data, robot.light_frame_id, _LOCAL)
+        return cls(theta, m.translation, m.rotation, jac, local)  # pinocchio returns copies: safe to keep
 
 
 class PrimaryTask(Protocol):
@@ -88,7 +92,7 @@ class LightPointingTask:
 
     e = [a* − a_L ; w·(φ_x, φ_y)], where φ = angle·axis is the rotation vector (light frame) that turns
     z_L onto d*: with d_L = R_WLᵀ d*, φ = atan2(|(d_x, d_y)|, d_z) · (−d_y, d_x)/|(d_x, d_y)|.
-    J = [J_v ; w·(R_WLᵀ J_ω)_{x,y}]. φ has no spurious zero at z_L = −d* (angle π), unlike z_L × d*.
+    J = [J_v ; w·(R_WLᵀ J_ω)_{x,y}] (the LOCAL Jacobian's angular rows). φ has no spurious zero at z_L = −d* (angle π), unlike z_L × d*.
     """
 
     dim = 5
@@ -99,19 +103,17 @@ class LightPointingTask:
         axis = sphere.center - self.target
         self.axis = axis / np.linalg.norm(axis)
         self.weight = float(sphere.radius if orientation_weight is None else orientation_weight)
+        self._target = tuple(float(x) for x in self.target)
 
     def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
         """(e (5,), J (5, n)) at ``state``: position error in m, pointing error in weighted rad."""
-        r, jac = state.rotation, state.jacobian
-        dx, dy, dz = self.axis @ r
+        dx, dy, dz = (self.axis @ state.rotation).tolist()
         s = math.hypot(dx, dy)
         k = self.weight * (math.atan2(s, dz) / s if s > 1e-12 else 1.0)
-        p = self.target - state.position
-        e = np.array([p[0], p[1], p[2], -k * dy, k * dx])
-        j = np.empty((5, jac.shape[1]))
-        j[:3] = jac[:3]
-        j[3:] = self.weight * (r[:, :2].T @ jac[3:])
-        return e, j
+        tx, ty, tz = self._target
+        px, py, pz = state.position.tolist()
+        e = np.array([tx - px, ty - py, tz - pz, -k * dy, k * dx])
+        return e, np.concatenate((state.jacobian[:3], self.weight * state.local_jacobian[3:5]))
 
 
 class LightPoseTask:
@@ -153,14 +155,10 @@ class LightPoseTask:
 
     def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
         """(e (6,), J (6, n)) at ``state``."""
-        r, jac = state.rotation, state.jacobian
-        e = np.empty(6)
-        e[:3] = self.target - state.position
-        e[3:] = self.weight * pin.log3(r.T @ self.rotation)
-        j = np.empty((6, jac.shape[1]))
-        j[:3] = jac[:3]
-        j[3:] = self.weight * (r.T @ jac[3:])
-        return e, j
+        e = np.concatenate(
+            (self.target - state.position, self.weight * pin.log3(state.rotation.T @ self.rotation))
+        )
+        return e, np.concatenate((state.jacobian[:3], self.weight * state.local_jacobian[3:]))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -190,6 +188,8 @@ class JointLimitTask:
 
     def __init__(self, weight: float = 1.0) -> None:
         self.weight = float(weight)
+        self._limits: tuple[Array, Array] | None = None
+        self._centre = self._scale = np.zeros(0)
 
     def value(self, robot: Robot, state: KinematicState) -> float:
         """H(θ) (dimensionless)."""
@@ -198,8 +198,12 @@ class JointLimitTask:
 
     def gradient(self, robot: Robot, state: KinematicState) -> Array:
         """∇H (n,), 1/rad."""
-        span = robot.upper - robot.lower
-        return (state.theta - 0.5 * (robot.lower + robot.upper)) / (span * span)
+        limits = self._limits
+        if limits is None or limits[0] is not robot.lower or limits[1] is not robot.upper:
+            self._limits = (robot.lower, robot.upper)
+            self._centre = 0.5 * (robot.lower + robot.upper)
+            self._scale = 1.0 / (robot.upper - robot.lower) ** 2
+        return (state.theta - self._centre) * self._scale
 
 
 class PostureTask:
