@@ -73,7 +73,7 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
     plan: dict[str, Any] = {
         key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations")
     }
-    stages = sorted({stage for r in runs for stage in r["stages_s"]})
+    stages = list(dict.fromkeys(stage for r in runs for stage in r["stages_s"]))  # in pipeline order
     plan["stages_s"] = {s: _dist([r["stages_s"][s] for r in runs if s in r["stages_s"]]) for s in stages}
 
     per_knot = getattr(baselines, BASELINE, None)

@@ -165,6 +165,15 @@ class Report:
     def failed(self) -> list[Outcome]:
         return [outcome for outcome in self.outcomes if outcome.failed]
 
+    @property
+    def notes(self) -> list[str]:
+        """Why a baseline is missing, for each result that says so under ``baseline_missing``."""
+        return [
+            f"{o.name}: baseline missing ({o.result['baseline_missing']})"
+            for o in self.outcomes
+            if o.result is not None and o.result.get("baseline_missing")
+        ]
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "timestamp": self.timestamp,
@@ -185,6 +194,7 @@ class Report:
                 for o in self.outcomes
             ],
             "failed": [o.name for o in self.failed],
+            "notes": self.notes,
         }
 
 
@@ -380,27 +390,16 @@ def solve_rows(name: str, result: Result) -> list[Row]:
     ours, baseline = result["plan"], result["baseline"]
 
     def base(key: str) -> float | None:
-        return None if baseline is None else baseline[key]["median"]
+        return None if baseline is None else float(baseline[key]["median"])
+
+    def row(metric: str, key: str, success_pct: float | None = None) -> Row:
+        return Row(label, metric, ours[key]["median"], ours[key]["p98"], success_pct, base(key))
 
     return [
-        Row(
-            label,
-            "time [s]",
-            ours["time_s"]["median"],
-            ours["time_s"]["p98"],
-            result["success_pct"],
-            base("time_s"),
-        ),
-        Row(
-            label,
-            "joint path length [rad]",
-            ours["joint_path_length_rad"]["median"],
-            baseline_median=base("joint_path_length_rad"),
-        ),
-        Row(label, "motion time [s]", ours["motion_time_s"]["median"], baseline_median=base("motion_time_s")),
-        Row(
-            label, "max |h| [m]", ours["max_h_residual_m"]["median"], baseline_median=base("max_h_residual_m")
-        ),
+        row("time [s]", "time_s", result["success_pct"]),
+        row("joint path length [rad]", "joint_path_length_rad"),
+        row("motion time [s]", "motion_time_s"),
+        row("max |h| [m]", "max_h_residual_m"),
         Row(label, "NLP iterations", ours["nlp_iterations"]["median"], ours["nlp_iterations"]["p98"]),
     ]
 
@@ -568,6 +567,9 @@ def markdown(report: Report) -> str:
         "|" + "|".join("---" if name in ("benchmark", "metric") else "---:" for name in COLUMNS) + "|",
         *(line(row.cells()) for row in report.rows),
     ]
+    if report.notes:
+        lines += ["", "Notes:", ""]
+        lines += [f"- {note}" for note in report.notes]
     if report.failed:
         lines += ["", "Failed:", ""]
         lines += [f"- `{outcome.name}`: {outcome.error}" for outcome in report.failed]
@@ -617,6 +619,8 @@ def bench(
     unbounded = console.options.update_width(sys.maxsize)
     console.width = max(console.width, Measurement.get(console, unbounded, printed).maximum)
     console.print(printed)
+    for note in report.notes:
+        console.print(Text(f"note: {note}"))
     json_path, md_path = write(report, out if out is not None else RESULTS_DIR)
     console.print(Text(f"wrote {json_path} and {md_path}"))
     if report.failed:

@@ -23,6 +23,7 @@ def run(n: int = 10000, seed: int = 0) -> dict:
         "solve": {"median_ms": 1.5, "p98_ms": 2.25, "success_pct": 97.5, "n": n},
         "sweep_s": {"coarse": {"median": 0.125, "p98": 0.5}},
         "meta": {"n": n, "seed": seed},
+        "baseline_missing": "no baseline in this fake",
     }
 """
 
@@ -91,6 +92,7 @@ def test_quick_sizes_rows_and_writers(runner: ModuleType, bench_dir: Path, tmp_p
     json_path, md_path = runner.write(report, tmp_path / "results")
     data = json.loads(json_path.read_text())
     assert data["quick"] is True and data["failed"] == [] and data["timestamp"] == report.timestamp
+    assert data["notes"] == ["fake: baseline missing (no baseline in this fake)"]
     machine = data["machine"]
     assert {"cpu", "cores", "ram_gb", "os", "python", "versions", "git"} <= set(machine)
     assert {"numpy", "casadi", "pin", "toppra", "meshcat", "trimesh", "embreex", "optlight"} <= set(
@@ -112,6 +114,7 @@ def test_quick_sizes_rows_and_writers(runner: ModuleType, bench_dir: Path, tmp_p
     assert "| benchmark | metric | median | p98 | success % | baseline median | ratio |" in md
     assert "| fake | solve [ms] | 1.5 | 2.25 | 97.5 | – | – |" in md
     assert f"Python {report.machine['python']}" in md
+    assert "- fake: baseline missing (no baseline in this fake)" in md
 
 
 def test_failure_recorded_and_exit_status(runner: ModuleType, bench_dir: Path, tmp_path: Path) -> None:
