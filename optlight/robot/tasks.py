@@ -9,8 +9,10 @@ Primary tasks give an error e (what is left to close) and a Jacobian J with J δ
   z_L through the sphere centre O (2 rows); the roll about z_L is free.
 - :class:`LightPoseTask` (6-D): position and full orientation R* (3 + 3 rows).
 
-Orientation rows are rotation vectors (rad) in the light frame, multiplied by a length w (default: the
-sphere radius b), so they read as metres: w·angle is how far the optical axis misses O.
+Errors and Jacobians are written in the light frame L (pinocchio's LOCAL Jacobian): rotating the rows
+by R_WLᵀ changes neither the least-squares step nor |e|. Orientation rows are rotation vectors (rad)
+multiplied by a length w (default: the sphere radius b), so they read as metres: w·angle is how far
+the optical axis misses O.
 
 Secondary objectives H(θ) are minimised in the null space of the primary task (γ = −k ∇H):
 :class:`JointLimitTask`, :class:`ManipulabilityTask`, :class:`PostureTask`.
@@ -19,7 +21,7 @@ Secondary objectives H(θ) are minimised in the null space of the primary task (
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -33,34 +35,43 @@ if TYPE_CHECKING:
 
 Array = NDArray[np.float64]
 
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _LOCAL = pin.ReferenceFrame.LOCAL
 
 
-class KinematicState(NamedTuple):
-    """Light pose and Jacobians at θ: a_L (3,) m, R_WL (3, 3), ``jacobian`` (6, n) LOCAL_WORLD_ALIGNED
-    (velocity of the light's origin and angular velocity, world axes) and ``local_jacobian`` (6, n)
-    LOCAL (the same twist in the light frame: its angular rows are R_WLᵀ J_ω).
+class KinematicState:
+    """Light pose and Jacobian at θ: ``position`` a_L (3,) m, ``rotation`` R_WL (3, 3) and
+    ``local_jacobian`` (6, n), pinocchio's LOCAL frame Jacobian of the light (the twist of the light
+    frame in its own axes: rows 0–2 Rᵀ·(velocity of a_L), rows 3–4 Rᵀ·ω). ``jacobian`` is the
+    LOCAL_WORLD_ALIGNED one (world axes), made from it on first use.
 
-    Holding one means the kinematics is up to date (built by :meth:`compute`); a NamedTuple, cheap to
-    make once per IK iteration.
+    Holding one means the kinematics is up to date (built by :meth:`compute`, one pinocchio pass).
     """
 
-    theta: Array
-    position: Array
-    rotation: Array
-    jacobian: Array
-    local_jacobian: Array
+    __slots__ = ("_jacobian", "local_jacobian", "position", "rotation", "theta")
+
+    def __init__(self, theta: Array, position: Array, rotation: Array, local_jacobian: Array) -> None:
+        self.theta = theta
+        self.position = position
+        self.rotation = rotation
+        self.local_jacobian = local_jacobian
+        self._jacobian: Array | None = None
 
     @classmethod
     def compute(cls, robot: Robot, theta: Array) -> KinematicState:
-        """Forward kinematics and the light Jacobian at θ (one pinocchio pass)."""
+        """Forward kinematics and the light Jacobian at θ."""
         q = theta if robot.angles_are_q else robot.to_pin(theta)
         pin.computeJointJacobians(robot.model, robot.data, q)
         m = pin.updateFramePlacement(robot.model, robot.data, robot.light_frame_id)
-        jac = pin.getFrameJacobian(robot.model, robot.data, robot.light_frame_id, _LWA)
         local = pin.getFrameJacobian(robot.model, robot.data, robot.light_frame_id, _LOCAL)
-        return cls(theta, m.translation, m.rotation, jac, local)  # pinocchio returns copies: safe to keep
+        return cls(theta, m.translation, m.rotation, local)  # pinocchio returns copies: safe to keep
+
+    @property
+    def jacobian(self) -> Array:
+        """LOCAL_WORLD_ALIGNED Jacobian (6, n): [R J_local,v ; R J_local,ω]."""
+        if self._jacobian is None:
+            r, local = self.rotation, self.local_jacobian
+            self._jacobian = np.concatenate((r @ local[:3], r @ local[3:]))
+        return self._jacobian
 
 
 class PrimaryTask(Protocol):
@@ -90,9 +101,11 @@ def _target_position(sphere: LightSphere, target: ArrayLike, tol: float = 1e-6) 
 class LightPointingTask:
     """5-D task: a_L = a* and z_L ∥ d* = (O − a*)/b, roll free.
 
-    e = [a* − a_L ; w·(φ_x, φ_y)], where φ = angle·axis is the rotation vector (light frame) that turns
-    z_L onto d*: with d_L = R_WLᵀ d*, φ = atan2(|(d_x, d_y)|, d_z) · (−d_y, d_x)/|(d_x, d_y)|.
-    J = [J_v ; w·(R_WLᵀ J_ω)_{x,y}] (the LOCAL Jacobian's angular rows). φ has no spurious zero at z_L = −d* (angle π), unlike z_L × d*.
+    In the light frame: e = [R_WLᵀ (a* − a_L) ; w·(φ_x, φ_y)], where φ is the rotation vector that
+    turns z_L onto d*: with d = R_WLᵀ d*, φ = atan2(|(d_x, d_y)|, d_z) · (−d_y, d_x, 0)/|(d_x, d_y)|.
+    J = rows 0–4 of the LOCAL Jacobian, rows 3–4 times w (exact at e = 0, first-order near it:
+    Gauss–Newton keeps its quadratic convergence). φ has no spurious zero at z_L = −d* (angle π),
+    unlike z_L × d*.
     """
 
     dim = 5
@@ -103,22 +116,22 @@ class LightPointingTask:
         axis = sphere.center - self.target
         self.axis = axis / np.linalg.norm(axis)
         self.weight = float(sphere.radius if orientation_weight is None else orientation_weight)
-        self._target = tuple(float(x) for x in self.target)
+        self._rows = np.array([1.0, 1.0, 1.0, self.weight, self.weight])[:, None]
 
     def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
         """(e (5,), J (5, n)) at ``state``: position error in m, pointing error in weighted rad."""
-        dx, dy, dz = (self.axis @ state.rotation).tolist()
+        r = state.rotation
+        dx, dy, dz = (self.axis @ r).tolist()
         s = math.hypot(dx, dy)
         k = self.weight * (math.atan2(s, dz) / s if s > 1e-12 else 1.0)
-        tx, ty, tz = self._target
-        px, py, pz = state.position.tolist()
-        e = np.array([tx - px, ty - py, tz - pz, -k * dy, k * dx])
-        return e, np.concatenate((state.jacobian[:3], self.weight * state.local_jacobian[3:5]))
+        px, py, pz = ((self.target - state.position) @ r).tolist()
+        return np.array([px, py, pz, -k * dy, k * dx]), self._rows * state.local_jacobian[:5]
 
 
 class LightPoseTask:
-    """6-D task: a_L = a*, R_WL = R* (roll fixed). e = [a* − a_L ; w·log3(R_WLᵀ R*)],
-    J = [J_v ; w·R_WLᵀ J_ω] (the Jacobian of log3 is taken as identity: Gauss–Newton, exact at e = 0).
+    """6-D task: a_L = a*, R_WL = R* (roll fixed). In the light frame e = [R_WLᵀ (a* − a_L) ;
+    w·log3(R_WLᵀ R*)], J = the LOCAL Jacobian with rows 3–5 times w (the Jacobian of log3 is taken
+    as identity: Gauss–Newton, exact at e = 0).
 
     R* must point its z axis at O; by default it is ``aim_rotation(a*, O, x_S)`` (the roll that keeps
     x_L along the sphere's x axis), see :func:`optlight.geometry.aim_rotation`.
