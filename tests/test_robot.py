@@ -58,7 +58,7 @@ def test_casadi_jacobian_equals_pinocchio_frame_jacobian(name: str) -> None:
         [theta],
         [ca.jacobian(p, theta), ca.jacobian(rot[:, 0], theta), ca.jacobian(rot[:, 2], theta)],
     )
-    for t in configurations(r, 50, seed=1):
+    for t in configurations(r, N_CONFIGS, seed=1):
         jp, jx, jz = (np.array(m) for m in jac(t))
         j = r.light_jacobian(t)
         _, rot_pin = r.light_pose(t)
