@@ -121,10 +121,19 @@ def joint_path_length(theta: Array) -> float:
     return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))
 
 
-def _ik(robot: Robot, sphere: LightSphere, target: Array, theta0: Array, problem: Problem) -> IKResult:
+def _ik(
+    robot: Robot, sphere: LightSphere, target: Array, theta0: Array, problem: Problem, *, restarts: bool = True
+) -> IKResult:
     s = problem.solver
     return generalized_ik(
-        robot, sphere, target, theta0, max_iter=s.ik_max_iter, tol=s.ik_tol, damping=s.ik_damping
+        robot,
+        sphere,
+        target,
+        theta0,
+        max_iter=s.ik_max_iter,
+        tol=s.ik_tol,
+        damping=s.ik_damping,
+        restarts=restarts,
     )
 
 
@@ -178,7 +187,8 @@ def knot_ik(
     thetas = np.empty((path.n_knots, robot.n))
     previous, failures = theta_start, 0
     for k, position in enumerate(path.positions):
-        result = _ik(robot, sphere, position, previous, problem)
+        # no random restarts: a restart lands on another IK branch, a jump the path cannot make
+        result = _ik(robot, sphere, position, previous, problem, restarts=False)
         failures += not result.success
         thetas[k] = previous = result.theta
     return thetas, failures

@@ -64,7 +64,7 @@ class TrajectoryOptimizer:
         *,
         path_mode: str = "arc",
         max_step: float = 0.25,
-        posture_weight: float = 1e-3,
+        posture_weight: float = 1e-6,
         max_iter: int = 300,
         tol: float = 1e-8,
         verbose: bool = False,
