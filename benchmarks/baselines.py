@@ -66,3 +66,62 @@ def paper_sweep(
         time_s=times,
         grid=CostGrid(zenith, azimuth, costs),
     )
+
+
+def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
+    """The paper's pipeline from landmarks to a timed trajectory: great-circle knots, generalized IK
+    at every knot (each started from the previous one), TOPPRA on those knots; no trajectory NLP.
+
+    The same scene, landmark search, placement, path and timing code as :func:`optlight.solve`, so
+    the difference to it is the trajectory NLP alone. Returns the time (s, landmark search included),
+    the joint path length Σ|Δθ| (rad), the motion time without dwells (s), the largest |h| over the
+    knots (m, pinocchio) and whether the timed trajectory passes verification.
+    """
+    from optlight import pipeline
+    from optlight.geometry import h_residual
+    from optlight.planning.landmarks import find_landmarks
+    from optlight.planning.path import build_path
+    from optlight.planning.timing import time_parameterize
+    from optlight.robot import load_robot
+    from optlight.verify import verify_trajectory
+
+    start = time.perf_counter()
+    scene = Scene.from_problem(problem)
+    robot = load_robot(problem)
+    sphere = scene.sphere
+    landmarks = find_landmarks(problem, scene)
+    kept, thetas, _ = pipeline.place_landmarks(problem, robot, sphere, landmarks.landmarks)
+    order = pipeline.visiting_order(problem, kept, thetas)
+    positions = np.array([kept[i].position for i in order])
+    path = build_path(sphere, positions, np.arange(len(order)), math.radians(problem.trajectory.knot_spacing_deg))
+    knots, _ = pipeline.knot_ik(problem, robot, sphere, path, thetas[order[0]])
+    velocity = robot.velocity_limit * problem.robot.velocity_scale
+    trajectory = time_parameterize(
+        [knots[s] for s in path.segments()] or [knots[:1]],
+        velocity,
+        robot.acceleration_limit,
+        problem.trajectory.dwell_s,
+    )
+    elapsed = time.perf_counter() - start
+    h = max(
+        float(np.abs(h_residual(*robot.light_pose(theta), sphere.center, sphere.radius)).max()) for theta in knots
+    )
+    report = verify_trajectory(
+        trajectory,
+        light_pose=robot.light_pose,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=velocity,
+        acceleration_limit=robot.acceleration_limit,
+        sphere=sphere,
+        landmark_positions=positions,
+        planned_path=path.positions,
+    )
+    intervals = trajectory.landmark_intervals
+    return {
+        "time_s": elapsed,
+        "joint_path_length": pipeline.joint_path_length(knots),
+        "motion_time": float(trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0])),
+        "max_h_residual": h,
+        "verification_passed": report.passed,
+    }

@@ -249,6 +249,7 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
         robot,
         path_mode=problem.trajectory.path,
         max_step=problem.trajectory.max_step_rad,
+        joint_weights=1.0 / (robot.velocity_limit * problem.robot.velocity_scale) ** 2,
         max_iter=problem.solver.max_iter,
         tol=problem.solver.tol,
         verbose=problem.solver.verbose,

@@ -9,7 +9,9 @@ position and rotation from the symbolic forward kinematics:
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
 - joint bounds, and |θ_{k+1} − θ_k| ≤ max_step per joint.
 
-Cost Σ_k |θ_{k+1} − θ_k|² + w Σ_k |θ_k − θ_ref|² (a small posture term settles the null space).
+Cost Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² + w Σ_k |θ_k − θ_ref|². With W_j = 1/v_max,j² (the
+pipeline's choice) the first term is the squared time each step takes at the velocity limits, a
+smooth stand-in for the motion time TOPPRA will find; the small posture term settles the null space.
 The per-knot constraints are one SX function mapped over the knots, so the graph stays small.
 """
 
@@ -55,7 +57,7 @@ class TrajectoryOptimizer:
     """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots).
 
     ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
-    ``theta_ref`` and ``n``. Solvers are cached, so solving many paths of the same size reuses one.
+    ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1). Solvers are cached, so solving many paths of the same size reuses one.
     """
 
     def __init__(
@@ -65,6 +67,7 @@ class TrajectoryOptimizer:
         path_mode: str = "arc",
         max_step: float = 0.25,
         posture_weight: float = 1e-6,
+        joint_weights: NDArray[np.float64] | None = None,
         max_iter: int = 300,
         tol: float = 1e-8,
         verbose: bool = False,
@@ -73,6 +76,7 @@ class TrajectoryOptimizer:
         self.path_mode = path_mode
         self.max_step = float(max_step)
         self.posture_weight = float(posture_weight)
+        self.joint_weights = np.ones(robot.n) if joint_weights is None else np.asarray(joint_weights, float)
         self.options = {
             "ipopt.max_iter": int(max_iter),
             "ipopt.tol": float(tol),
@@ -139,7 +143,8 @@ class TrajectoryOptimizer:
             constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
         dtheta = theta[:, 1:] - theta[:, :-1]
         posture = theta - ca.repmat(theta_ref, 1, n_knots)
-        cost = ca.sumsqr(dtheta) + self.posture_weight * ca.sumsqr(posture)
+        w = ca.DM(np.sqrt(self.joint_weights))
+        cost = ca.sumsqr(ca.repmat(w, 1, n_knots - 1) * dtheta) + self.posture_weight * ca.sumsqr(posture)
         nlp = {"x": ca.vec(theta), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
         return ca.nlpsol("trajectory_nlp", "ipopt", nlp, self.options)
 
