@@ -241,7 +241,10 @@ def test_textured_glb_albedo_comes_from_the_texture(tmp_path: Path) -> None:
     ball.export(path)
     scene = Scene.from_problem(make_problem(object={"kind": "mesh", "path": str(path)}), 32, 32)
     local = object_frame(scene, scene.mesh.vertices)
-    assert np.allclose(scene.albedo, np.where(local[:, 0] > 0, srgb_to_linear(220), srgb_to_linear(30)))
+    off_seam = np.abs(local[:, 0]) > 1e-9  # vertices on x = 0 carry either texel, by round-off
+    expected = np.where(local[:, 0] > 0, srgb_to_linear(220), srgb_to_linear(30))
+    assert off_seam.sum() > 0.8 * len(local)
+    assert np.allclose(scene.albedo[off_seam], expected[off_seam])
 
 
 def test_mesh_without_colours_uses_constant_albedo(tmp_path: Path) -> None:
