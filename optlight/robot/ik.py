@@ -202,8 +202,8 @@ def generalized_ik(
     ``secondary``/``weights``: null-space objectives and their gains. ``tol``: on |e|² (m²).
     ``patience``: iterations without a 2 % decrease of |e|² before a restart (``restarts``) from the
     best of 8 seeded random configurations; pass ``restarts=False`` to stay near ``theta0`` (path
-    following).
-    Never raises for an unreachable target: returns ``success=False`` with the closest θ found.
+    following). An unreachable target gives ``success=False`` with the closest θ found (within the
+    limits); :class:`UnreachableError` only for a target position that is not on the sphere.
     """
     t_start = time.perf_counter()
     primary = make_primary_task(sphere, target, task, rotation)
