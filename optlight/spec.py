@@ -335,10 +335,10 @@ class EnvironmentSpec:
 
     enabled: bool = key(False, "model the environment: clearance and view-cone constraints, exact checks")
     margin_m: float = key(
-        0.02, "smallest allowed distance between the robot (light included) and an obstacle", unit="m", lo=0.0
+        0.01, "smallest allowed distance between the robot (light included) and an obstacle", unit="m", lo=0.0
     )
     self_margin_m: float = key(
-        0.01, "smallest allowed distance between two robot links that can come close", unit="m", lo=0.0
+        0.005, "smallest allowed distance between two robot links that can come close", unit="m", lo=0.0
     )
     table_height_m: float | None = key(
         None, "world z of the table top; everything below it is solid (unset: no table)", unit="m"
@@ -366,19 +366,21 @@ class EnvironmentSpec:
         lo_open=True,
     )
     light_radius_m: float = key(
-        0.03, "radius of the light housing, a cylinder behind the light frame (along −z)", unit="m", lo=0.0, lo_open=True
+        0.025,
+        "radius of the light housing, a cylinder behind the light frame (along −z)",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
     )
-    light_length_m: float = key(0.08, "length of the light housing", unit="m", lo=0.0, lo_open=True)
+    light_length_m: float = key(0.05, "length of the light housing", unit="m", lo=0.0, lo_open=True)
     view_cone: Literal["off", "capture", "path"] = key(
         "capture",
         "keep the robot and the light out of the camera's view of the object at capture times, "
         "along the whole path, or nowhere",
     )
-    view_margin_deg: float = key(
-        2.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0
-    )
+    view_margin_deg: float = key(1.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0)
     spheres_per_link: int = key(
-        3, "most spheres fitted to one link's collision geometry (the NLPs' approximation)", lo=1, hi=16
+        4, "most spheres fitted to one link's collision geometry (the NLPs' approximation)", lo=1, hi=16
     )
     boxes: tuple[BoxSpec, ...] = key((), "box obstacles, as [[environment.boxes]] tables")
     cylinders: tuple[CylinderSpec, ...] = key((), "cylinder obstacles, as [[environment.cylinders]] tables")

@@ -1,0 +1,295 @@
+"""The robot's environment (issue 7): obstacles, self-collision and the camera's view of the object.
+
+:class:`Environment` is what the planners and the verifier use::
+
+    env = Environment.from_problem(problem)
+    g = env.clearance_function(robot)     # casadi θ -> distances − margins (≥ 0: clear)
+    v = env.view_cone_function(robot)     # casadi θ -> distances to the view cone (≥ 0: out of view)
+    report = env.check(robot, thetas, times, capture_times=...)   # exact, coal
+
+Three models of the same geometry, from coarse to exact:
+
+- the NLPs see spheres fitted to each robot body (:mod:`.spheres`; they contain the body's convex
+  collision shapes) against analytic obstacles (:mod:`.shapes`): row ``(s, o)`` of the clearance is
+  sd_o(c_s(θ)) − r_s − margin, row ``(s, t)`` of two bodies that can collide is
+  |c_s(θ) − c_t(θ)| − r_s − r_t − self_margin, and a view row is sd_cone(c_s(θ)) − r_s;
+- :meth:`Environment.sphere_clearance` evaluates the same rows with NumPy and pinocchio's kinematics
+  (the reference the CasADi graph is tested against);
+- :meth:`Environment.check` computes exact distances with coal between the robot's collision shapes,
+  the light housing, the obstacles and the view cone (:mod:`.check`).
+
+Obstacles of a problem (``[environment]``): the object's bounding sphere ("object", centre O, radius
+``object_radius_m`` or the farthest point of the object's mesh), the table (a half-space below
+``table_height_m``, "table"), the camera body (a box behind the camera centre, camera axes,
+"camera_body") and its stand (a vertical cylinder from the body's lowest point down to the table, or
+to z = 0, "camera_stand"), and the boxes, cylinders and spheres listed. The view cone is
+:class:`ViewCone` around the object's bounding sphere, half-angle asin(R/d) + ``view_margin_deg``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.environment.check import (
+    EnvironmentReport,
+    EnvironmentViolation,
+    PairClearance,
+    check_configurations,
+)
+from optlight.environment.collision import LIGHT, VIEW_CONE, CollisionModel, robot_srdf
+from optlight.environment.shapes import (
+    SMOOTHING_M,
+    Ball,
+    Box,
+    Cylinder,
+    HalfSpace,
+    Obstacle,
+    ViewCone,
+    rotation_rpy_deg,
+)
+from optlight.environment.spheres import RobotSpheres, fit_spheres
+from optlight.robot.kinematics import symbolic_frame_pose
+from optlight.robot.loading import Robot
+from optlight.spec import EnvironmentSpec, Problem
+
+Array = NDArray[np.float64]
+
+__all__ = [
+    "LIGHT",
+    "VIEW_CONE",
+    "Ball",
+    "Box",
+    "CollisionModel",
+    "Cylinder",
+    "Environment",
+    "EnvironmentReport",
+    "EnvironmentViolation",
+    "HalfSpace",
+    "Obstacle",
+    "PairClearance",
+    "RobotSpheres",
+    "ViewCone",
+    "fit_spheres",
+    "listed_obstacles",
+    "robot_srdf",
+]
+
+#: Names the environment gives its own obstacles (and the light housing, the view cone).
+RESERVED_NAMES = ("object", "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE)
+
+
+def listed_obstacles(spec: EnvironmentSpec) -> list[tuple[str, Obstacle]]:
+    """The boxes, cylinders and spheres of ``[environment]``, each with its key path
+    (``environment.boxes[0]`` …), in file order."""
+    out: list[tuple[str, Obstacle]] = []
+    for i, b in enumerate(spec.boxes):
+        box = Box(
+            b.name, np.asarray(b.center_m, float), rotation_rpy_deg(b.rpy_deg), 0.5 * np.asarray(b.size_m)
+        )
+        out.append((f"environment.boxes[{i}]", box))
+    for i, c in enumerate(spec.cylinders):
+        cyl = Cylinder(
+            c.name, np.asarray(c.center_m, float), rotation_rpy_deg(c.rpy_deg), c.radius_m, 0.5 * c.length_m
+        )
+        out.append((f"environment.cylinders[{i}]", cyl))
+    for i, s in enumerate(spec.spheres):
+        out.append((f"environment.spheres[{i}]", Ball(s.name, np.asarray(s.center_m, float), s.radius_m)))
+    return out
+
+
+class Environment:
+    """Obstacles, view cone and margins of a problem (module docstring), independent of the robot;
+    the robot-specific models (:class:`CollisionModel`: geometry, pairs, spheres) are built on first
+    use per robot and cached.
+
+    Attributes: ``obstacles`` (tuple of shapes with ``name``), ``view_cone`` (:class:`ViewCone`, or
+    None when ``view_mode`` is "off"), ``view_mode`` ("off", "capture", "path"), ``margin`` and
+    ``self_margin`` (m), ``light_radius``/``light_length`` (m, the light housing),
+    ``spheres_per_link``.
+    """
+
+    def __init__(
+        self,
+        obstacles: tuple[Obstacle, ...],
+        view_cone: ViewCone | None,
+        *,
+        view_mode: str,
+        margin: float,
+        self_margin: float,
+        light_radius: float,
+        light_length: float,
+        spheres_per_link: int,
+    ) -> None:
+        names = [o.name for o in obstacles]
+        if len(set(names)) != len(names):
+            raise ValueError(f"obstacle names must be unique, got {names}")
+        if view_mode not in ("off", "capture", "path") or (view_mode != "off") != (view_cone is not None):
+            raise ValueError(f"view_mode {view_mode!r} does not match the view cone {view_cone}")
+        self.obstacles = tuple(obstacles)
+        self.view_cone = view_cone
+        self.view_mode = view_mode
+        self.margin = float(margin)
+        self.self_margin = float(self_margin)
+        self.light_radius = float(light_radius)
+        self.light_length = float(light_length)
+        self.spheres_per_link = int(spheres_per_link)
+        self._models: dict[int, CollisionModel] = {}
+
+    @classmethod
+    def from_problem(cls, problem: Problem) -> Environment:
+        """The environment of a problem's ``[environment]`` section (built whether or not
+        ``enabled`` is set: the caller decides whether to use it)."""
+        from optlight.scene.camera import Camera
+        from optlight.scene.objects import build_object
+
+        spec = problem.environment
+        center = np.asarray(problem.object.center_m, float)
+        if spec.object_radius_m is not None:
+            radius = float(spec.object_radius_m)
+        else:
+            radius = float(np.max(np.linalg.norm(build_object(problem).mesh.vertices - center, axis=1)))
+        obstacles: list[Obstacle] = [Ball("object", center, radius)]
+        if spec.table_height_m is not None:
+            obstacles.append(HalfSpace("table", np.array([0.0, 0.0, 1.0]), float(spec.table_height_m)))
+        camera = Camera.from_spec(problem.camera, center)
+        if spec.camera_body:
+            half = 0.5 * np.asarray(spec.camera_body_size_m, float)
+            body_center = camera.position - half[2] * camera.rotation[:, 2]
+            obstacles.append(Box("camera_body", body_center, camera.rotation, half))
+            bottom = body_center[2] - float(np.abs(camera.rotation[2]) @ half)
+            floor = spec.table_height_m if spec.table_height_m is not None else 0.0
+            if bottom > floor:
+                stand_center = np.array([body_center[0], body_center[1], 0.5 * (bottom + floor)])
+                obstacles.append(
+                    Cylinder(
+                        "camera_stand",
+                        stand_center,
+                        np.eye(3),
+                        spec.camera_stand_radius_m,
+                        0.5 * (bottom - floor),
+                    )
+                )
+        obstacles += [obs for _, obs in listed_obstacles(spec)]
+        cone = None
+        if spec.view_cone != "off":
+            cone = ViewCone.around(camera.position, center, radius, math.radians(spec.view_margin_deg))
+        return cls(
+            tuple(obstacles),
+            cone,
+            view_mode=spec.view_cone,
+            margin=spec.margin_m,
+            self_margin=spec.self_margin_m,
+            light_radius=spec.light_radius_m,
+            light_length=spec.light_length_m,
+            spheres_per_link=spec.spheres_per_link,
+        )
+
+    # ------------------------------------------------------------------ robot models
+    def collision_model(self, robot: Robot) -> CollisionModel:
+        """The robot in this environment: geometry, pairs and spheres (built once per robot)."""
+        key = id(robot)
+        if key not in self._models or self._models[key].robot is not robot:
+            self._models[key] = CollisionModel(
+                robot,
+                self.obstacles,
+                self.view_cone,
+                margin=self.margin,
+                self_margin=self.self_margin,
+                light_radius=self.light_radius,
+                light_length=self.light_length,
+                max_spheres=self.spheres_per_link,
+            )
+        return self._models[key]
+
+    def clearance_labels(self, robot: Robot) -> list[str]:
+        """One label per row of :meth:`clearance_function`: ``"<body>[i] ↔ <obstacle>"`` for the
+        obstacle rows, then ``"<body>[i] ↔ <body>[j]"`` for the self-collision rows."""
+        cm = self.collision_model(robot)
+        sp = cm.spheres
+        obs = [f"{sp.label(s)} ↔ {self.obstacles[o].name}" for s, o in cm.obstacle_rows]
+        own = [f"{sp.label(s)} ↔ {sp.label(t)}" for s, t in cm.self_rows]
+        return obs + own
+
+    def clearance_function(self, robot: Robot) -> ca.Function:
+        """``casadi.Function("clearance", [theta (n×1)], [c (m×1)])``, m = obstacle rows + self rows
+        (:meth:`clearance_labels`): c ≥ 0 means every sphere clears every obstacle by ``margin`` and
+        every self pair by ``self_margin`` (m). SX graph, common subexpressions eliminated."""
+        cm = self.collision_model(robot)
+        theta = ca.SX.sym("theta", robot.n)
+        centers = self._symbolic_centers(robot, cm.spheres, theta)
+        r = cm.spheres.radii
+        rows = [
+            self.obstacles[o].signed_distance_sx(centers[s]) - r[s] - self.margin for s, o in cm.obstacle_rows
+        ]
+        rows += [
+            ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - self.self_margin
+            for s, t in cm.self_rows
+        ]
+        out = ca.vertcat(*rows) if rows else ca.SX(0, 1)
+        return ca.Function("clearance", [theta], [out], ["theta"], ["clearance"], {"cse": True})
+
+    def view_cone_function(self, robot: Robot) -> ca.Function:
+        """``casadi.Function("view_clearance", [theta (n×1)], [v (m×1)])``: per robot sphere that can
+        reach the cone (:attr:`CollisionModel.view_rows`, the light's included), its signed distance to
+        the view cone minus its radius (m); v ≥ 0 means out of the camera's view of the object.
+        Raises ValueError when ``view_mode`` is "off"."""
+        if self.view_cone is None:
+            raise ValueError("the view cone is off (environment.view_cone = 'off')")
+        cm = self.collision_model(robot)
+        theta = ca.SX.sym("theta", robot.n)
+        centers = self._symbolic_centers(robot, cm.spheres, theta)
+        rows = [self.view_cone.signed_distance_sx(centers[s]) - cm.spheres.radii[s] for s in cm.view_rows]
+        out = ca.vertcat(*rows) if rows else ca.SX(0, 1)
+        return ca.Function("view_clearance", [theta], [out], ["theta"], ["view_clearance"], {"cse": True})
+
+    @staticmethod
+    def _symbolic_centers(robot: Robot, spheres: RobotSpheres, theta: ca.SX) -> list[ca.SX]:
+        model = robot.model
+        poses = {}
+        for j in np.unique(spheres.joint):
+            if j == 0:
+                continue
+            fid = model.getFrameId(model.names[int(j)], pin.FrameType.JOINT)
+            p, r = symbolic_frame_pose(model, fid, name=f"joint_{int(j)}_pose")(theta)
+            poses[int(j)] = (p, r)
+        return spheres.symbolic_centers(poses)
+
+    def sphere_clearance(self, robot: Robot, theta: ArrayLike) -> tuple[Array, Array]:
+        """NumPy twin of :meth:`clearance_function` and :meth:`view_cone_function` at one θ (rad),
+        from pinocchio's kinematics: (clearance rows (m,), view rows) in m."""
+        cm = self.collision_model(robot)
+        sp = cm.spheres
+        c = sp.world_centers(robot.model, robot.data, robot.to_pin(theta))
+        r = sp.radii
+        obs = [self.obstacles[o].signed_distance(c[s])[0] - r[s] - self.margin for s, o in cm.obstacle_rows]
+        d = c[cm.self_rows[:, 0]] - c[cm.self_rows[:, 1]]
+        own = np.sqrt(np.sum(d * d, axis=1) + SMOOTHING_M**2) - r[cm.self_rows].sum(axis=1) - self.self_margin
+        clearance = np.concatenate([np.asarray(obs, float), own])
+        view = (
+            self.view_cone.signed_distance(c[cm.view_rows]) - r[cm.view_rows]
+            if self.view_cone is not None
+            else np.zeros(0)
+        )
+        return clearance, view
+
+    # ------------------------------------------------------------------ exact checks
+    def check(
+        self,
+        robot: Robot,
+        thetas: ArrayLike,
+        times: ArrayLike,
+        capture_times: ArrayLike | None = None,
+    ) -> EnvironmentReport:
+        """Exact coal checks of the configurations ``thetas`` (T, n) at ``times`` (T,) (s):
+        robot–obstacle distance ≥ ``margin``, self distance ≥ ``self_margin``, and, per
+        ``view_mode``, no robot body or light in the view cone at the samples at ``capture_times``
+        ("capture"; each must be one of ``times``) or at every sample ("path").
+        See :func:`optlight.environment.check.check_configurations`."""
+        return check_configurations(
+            self.collision_model(robot), thetas, times, view=self.view_mode, capture_times=capture_times
+        )

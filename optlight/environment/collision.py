@@ -1,0 +1,330 @@
+"""The robot in its environment as one pinocchio GeometryModel, the pairs to check, and its spheres.
+
+:class:`CollisionModel` puts together, for one robot and one environment:
+
+- the robot's collision geometry from its URDF (:meth:`Robot.geometry_model`: hand joints reduced
+  away, base placement applied), every mesh replaced by its convex hull (coal ``Convex``: GJK/EPA
+  give true penetration depths; coal's mesh-vs-shape distances report only a per-triangle depth when
+  in contact). The hull contains the mesh, so its distances never exceed the mesh's; the collision
+  meshes of the arms in example-robot-data are convex or close to it (panda: hull volume = mesh
+  volume to 1 %);
+- the light housing: a cylinder (radius, length) behind the light frame, along −z_L, body "light";
+- the obstacles (attached to the world) and the view cone.
+
+Bodies are the URDF links (all geometry objects of one link) plus "light". Pairs checked
+(:attr:`CollisionModel.pairs`):
+
+- ``obstacle``: every moving body × every obstacle, threshold ``margin`` (bodies fixed to the world,
+  such as a base resting on the table, are not checked: nothing the planner does changes them);
+- ``self``: body pairs on different joints that are not adjacent (one joint the parent of the other),
+  not disabled by the robot's SRDF, and not already in contact at the reference configuration θ_ref
+  (touching by design, as MoveIt's "Default"); threshold ``self_margin``;
+- ``view``: every moving body × the view cone, threshold 0 (the cone's margin is in its angle).
+
+For the NLPs, :attr:`CollisionModel.spheres` cover every body (:mod:`.spheres`); the rows of the
+clearance constraints are (sphere, obstacle) for moving spheres, except those that can never come
+within ``margin`` + :data:`PRUNE_SLACK_M` of the obstacle (the sphere centre stays within a chain-length
+bound of its first joint's origin and sd is 1-Lipschitz), and all sphere pairs of the self pairs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+from numpy.typing import NDArray
+
+from optlight.environment.shapes import Obstacle, ViewCone
+from optlight.environment.spheres import BodySpheres, RobotSpheres, fit_spheres
+from optlight.errors import RobotError
+from optlight.robot.loading import ROBOTS, Robot, example_robot_data_dir
+
+Array = NDArray[np.float64]
+PairKind = Literal["obstacle", "self", "view"]
+
+#: Sphere–obstacle rows are kept when the sphere can come this close beyond the margin (m).
+PRUNE_SLACK_M = 0.05
+#: Name of the light housing body.
+LIGHT = "light"
+#: Name of the view cone in pairs and reports.
+VIEW_CONE = "view_cone"
+#: Sides of the prisms and refinement of the polyhedra that stand in for round primitives when
+#: spheres are fitted (they are circumscribed: they contain the exact shape).
+_SECTIONS = 64
+_ICO_SUBDIVISIONS = 2
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body of the robot: a URDF link or the light housing. ``joint`` is its pinocchio
+    joint (0 = fixed to the world); ``geometries`` index the geometry model."""
+
+    name: str
+    joint: int
+    geometries: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class Pair:
+    """A pair of geometry objects to check: ``first`` a robot geometry, ``second`` an obstacle, a
+    robot geometry or the view cone; ``threshold`` the smallest allowed distance (m)."""
+
+    kind: PairKind
+    first: int
+    second: int
+    first_body: str
+    second_name: str
+    threshold: float
+
+
+def robot_srdf(robot: Robot) -> Path | None:
+    """The SRDF of a named example-robot-data robot loaded from its own URDF (None otherwise)."""
+    info = ROBOTS.get(robot.name)
+    if info is None or info.srdf is None:
+        return None
+    robots = example_robot_data_dir() / "example-robot-data" / "robots"
+    if Path(robot.urdf_path).resolve() != (robots / info.urdf).resolve():
+        return None
+    return robots / info.srdf
+
+
+def _surface(geometry: coal.CollisionGeometry, name: str) -> trimesh.Trimesh:
+    """A closed triangle surface that contains the shape (in the shape's frame)."""
+    if isinstance(geometry, coal.BVHModelBase):
+        return trimesh.Trimesh(np.asarray(geometry.vertices(), float)).convex_hull
+    if isinstance(geometry, coal.ConvexBase):
+        return trimesh.Trimesh(np.asarray(geometry.points(), float)).convex_hull
+    if isinstance(geometry, coal.Box):
+        return trimesh.creation.box(extents=2.0 * np.asarray(geometry.halfSide, float))
+    if isinstance(geometry, coal.Cylinder):
+        r = geometry.radius / np.cos(np.pi / _SECTIONS)
+        return trimesh.creation.cylinder(radius=r, height=2.0 * geometry.halfLength, sections=_SECTIONS)
+    if isinstance(geometry, coal.Sphere):
+        unit = trimesh.creation.icosphere(subdivisions=_ICO_SUBDIVISIONS)
+        inradius = float(np.min(np.abs(np.einsum("ij,ij->i", unit.face_normals, unit.triangles[:, 0]))))
+        unit.apply_scale(geometry.radius / inradius)
+        return unit
+    raise RobotError(
+        f"collision geometry {name!r} is a {type(geometry).__name__}; the environment handles meshes, "
+        "convex meshes, boxes, cylinders and spheres"
+    )
+
+
+def _convex(geometry: coal.CollisionGeometry) -> coal.CollisionGeometry:
+    """Meshes become their convex hull (coal Convex); primitives stay."""
+    if isinstance(geometry, coal.BVHModelBase):
+        geometry.buildConvexRepresentation(False)
+        return geometry.convex
+    return geometry
+
+
+class CollisionModel:
+    """Robot, light housing, obstacles and view cone in one GeometryModel (module docstring).
+
+    Attributes: ``robot``; ``geometry`` (pin.GeometryModel) and ``geometry_data``; ``bodies``
+    (tuple of :class:`Body`, robot links then the light); ``obstacles``; ``view_cone`` (or None);
+    ``pairs`` (tuple of :class:`Pair`); ``ignored_self_pairs`` (body-name pairs in contact at θ_ref);
+    ``spheres`` (:class:`RobotSpheres`, same body order); ``obstacle_rows`` ((S_o, 2) int: sphere,
+    obstacle index), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``view_rows`` (sphere indices);
+    ``motion_weights`` (G, n): ρ such that a point of geometry g moves at most Σ_i ρ[g, i] |Δθ_i|
+    between two configurations (m per rad, or m per m for prismatic joints).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        obstacles: tuple[Obstacle, ...],
+        view_cone: ViewCone | None,
+        *,
+        margin: float,
+        self_margin: float,
+        light_radius: float,
+        light_length: float,
+        max_spheres: int,
+    ) -> None:
+        self.robot = robot
+        self.obstacles = obstacles
+        self.view_cone = view_cone
+        self.margin = float(margin)
+        self.self_margin = float(self_margin)
+        model = robot.model
+        geom = robot.geometry_model("collision")
+        surfaces: list[trimesh.Trimesh] = []
+        for obj in geom.geometryObjects:
+            surfaces.append(_surface(obj.geometry, obj.name).apply_transform(obj.placement.homogeneous))
+            obj.geometry = _convex(obj.geometry)
+
+        # Robot-only pairs: all pairs on different joints, minus the SRDF's.
+        geom.addAllCollisionPairs()
+        srdf = robot_srdf(robot)
+        if srdf is not None:
+            pin.removeCollisionPairs(model, geom, str(srdf))
+        robot_pairs = [(cp.first, cp.second) for cp in geom.collisionPairs]
+        geom.removeAllCollisionPairs()
+
+        # Light housing: a cylinder behind the light frame, along −z_L.
+        light_frame = model.frames[robot.light_frame_id]
+        housing = light_frame.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.5 * light_length]))
+        light_shape = coal.Cylinder(float(light_radius), float(light_length))
+        light_id = geom.addGeometryObject(
+            pin.GeometryObject(LIGHT, light_frame.parentJoint, robot.light_frame_id, housing, light_shape)
+        )
+        surfaces.append(_surface(light_shape, LIGHT).apply_transform(housing.homogeneous))
+
+        names: dict[str, list[int]] = {}
+        joint_of: dict[str, int] = {}
+        for g, obj in enumerate(geom.geometryObjects):
+            body = LIGHT if g == light_id else model.frames[obj.parentFrame].name
+            names.setdefault(body, []).append(g)
+            joint_of[body] = int(obj.parentJoint)
+        self.bodies = tuple(Body(n, joint_of[n], tuple(gs)) for n, gs in names.items())
+        body_of = {g: b for b in self.bodies for g in b.geometries}
+        n_robot = len(geom.geometryObjects)
+
+        def adjacent(a: int, b: int) -> bool:
+            ja, jb = int(geom.geometryObjects[a].parentJoint), int(geom.geometryObjects[b].parentJoint)
+            return ja == jb or model.parents[ja] == jb or model.parents[jb] == ja
+
+        candidates = [(a, b) for a, b in robot_pairs if not adjacent(a, b)]
+        candidates += [(light_id, g) for g in range(n_robot) if g != light_id and not adjacent(light_id, g)]
+        obstacle_ids = []
+        for obs in obstacles:
+            obstacle_ids.append(
+                geom.addGeometryObject(pin.GeometryObject(obs.name, 0, 0, obs.placement, obs.coal_geometry()))
+            )
+        cone_id = None
+        if view_cone is not None:
+            cone_id = geom.addGeometryObject(
+                pin.GeometryObject(VIEW_CONE, 0, 0, view_cone.placement, view_cone.coal_geometry())
+            )
+        self.geometry = geom
+        self.geometry_data = pin.GeometryData(geom)
+
+        # Self pairs touching at θ_ref are touching by design.
+        pin.updateGeometryPlacements(
+            model, robot.data, geom, self.geometry_data, robot.to_pin(robot.theta_ref)
+        )
+        touching = {(a, b) for a, b in candidates if self.distance(a, b) <= 0.0}
+        self.ignored_self_pairs = tuple(sorted({(body_of[a].name, body_of[b].name) for a, b in touching}))
+        moving = [g for g in range(n_robot) if geom.geometryObjects[g].parentJoint != 0]
+        pairs = [
+            Pair("obstacle", g, o, body_of[g].name, obs.name, self.margin)
+            for g in moving
+            for o, obs in zip(obstacle_ids, obstacles, strict=True)
+        ]
+        pairs += [
+            Pair("self", a, b, body_of[a].name, body_of[b].name, self.self_margin)
+            for a, b in candidates
+            if (a, b) not in touching
+        ]
+        if cone_id is not None:
+            pairs += [Pair("view", g, cone_id, body_of[g].name, VIEW_CONE, 0.0) for g in moving]
+        self.pairs = tuple(pairs)
+        self.motion_weights = self._motion_weights(n_robot)
+
+        # Spheres, their rows.
+        self.spheres = RobotSpheres(
+            tuple(
+                BodySpheres(b.name, b.joint, *fit_spheres([surfaces[g] for g in b.geometries], max_spheres))
+                for b in self.bodies
+            )
+        )
+        self.obstacle_rows, self.view_rows = self._reachable_rows()
+        body_index = {b.name: i for i, b in enumerate(self.bodies)}
+        self_bodies = sorted(
+            {
+                tuple(sorted((body_index[p.first_body], body_index[p.second_name])))
+                for p in pairs
+                if p.kind == "self"
+            }
+        )
+        sb = self.spheres.body
+        self.self_rows = np.array(
+            [
+                (s, t)
+                for a, b in self_bodies
+                for s in np.flatnonzero(sb == a)
+                for t in np.flatnonzero(sb == b)
+            ],
+            dtype=int,
+        ).reshape(-1, 2)
+
+    # ------------------------------------------------------------------ helpers
+    def distance(self, a: int, b: int) -> float:
+        """coal distance (m, < 0 in contact) between geometry objects a and b at the current placements."""
+        req, res = coal.DistanceRequest(), coal.DistanceResult()
+        return float(
+            coal.distance(
+                self.geometry.geometryObjects[a].geometry,
+                _transform(self.geometry_data.oMg[a]),
+                self.geometry.geometryObjects[b].geometry,
+                _transform(self.geometry_data.oMg[b]),
+                req,
+                res,
+            )
+        )
+
+    def _chain(self, joint: int) -> list[int]:
+        """Moving joints from the root to ``joint`` (both included)."""
+        return [int(j) for j in self.robot.model.supports[joint]][1:]
+
+    def _travel(self, j: int) -> float:
+        """How far joint j can move its child's origin along its axis (m): prismatic range, else 0."""
+        joint = self.robot.model.joints[j]
+        if joint.shortname().removeprefix("JointModel").startswith("P"):
+            k = joint.idx_v
+            return float(max(abs(self.robot.lower[k]), abs(self.robot.upper[k])))
+        return 0.0
+
+    def _link_length(self, after: list[int]) -> float:
+        """Upper bound on the distance between the origins of the joint before ``after`` and the
+        last joint of ``after``: Σ (|translation of the joint placement| + travel)."""
+        model = self.robot.model
+        return float(
+            sum(np.linalg.norm(model.jointPlacements[k].translation) + self._travel(k) for k in after)
+        )
+
+    def _motion_weights(self, n_robot: int) -> Array:
+        """ρ[g, θ index] (class docstring): the distance from joint i's origin to any point of g
+        bounds |∂p/∂θ_i| for a revolute joint; it is 1 for a prismatic joint."""
+        model = self.robot.model
+        weights = np.zeros((n_robot, self.robot.n))
+        for g in range(n_robot):
+            obj = self.geometry.geometryObjects[g]
+            obj.geometry.computeLocalAABB()
+            extent = np.linalg.norm(obj.placement.act(np.asarray(obj.geometry.aabb_center))) + float(
+                obj.geometry.aabb_radius
+            )
+            chain = self._chain(int(obj.parentJoint))
+            for i, j in enumerate(chain):
+                if self._travel(j) > 0.0:
+                    weights[g, model.joints[j].idx_v] = 1.0
+                else:
+                    weights[g, model.joints[j].idx_v] = self._link_length(chain[i + 1 :]) + extent
+        return weights
+
+    def _reachable_rows(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """(sphere, obstacle) rows and view-cone sphere rows that can come within margin + slack."""
+        model, sp = self.robot.model, self.spheres
+        rows, view = [], []
+        for s in range(len(sp)):
+            j = int(sp.joint[s])
+            if j == 0:
+                continue
+            chain = self._chain(j)
+            origin = model.jointPlacements[chain[0]].translation[None, :]
+            reach = self._travel(chain[0]) + self._link_length(chain[1:]) + np.linalg.norm(sp.centers[s])
+            reach += sp.radii[s] + self.margin + PRUNE_SLACK_M
+            rows += [(s, o) for o, obs in enumerate(self.obstacles) if obs.signed_distance(origin)[0] < reach]
+            if self.view_cone is not None and self.view_cone.signed_distance(origin)[0] < reach:
+                view.append(s)
+        return np.array(rows, dtype=int).reshape(-1, 2), np.array(view, dtype=int)
+
+
+def _transform(m: pin.SE3) -> coal.Transform3s:
+    return coal.Transform3s(m.rotation, m.translation)

@@ -1,0 +1,153 @@
+"""Spheres fitted to the robot's collision geometry: the NLPs' stand-in for the exact shapes.
+
+Each body (a URDF link, or the light housing) is covered by k ≤ ``max_spheres`` spheres, fixed in its
+joint frame. The fit (:func:`fit_spheres`) covers the *surface* of the body's convex pieces exactly:
+
+1. the surface of each piece's convex hull (what the exact checks use) is subdivided to triangles
+   with edges ≤ :data:`EDGE_M`;
+2. its vertices are cut into k slabs of equal width along the principal axis (largest variance);
+   each slab gets a near-smallest ball holding its points (:func:`_enclosing_ball`);
+3. every triangle whose three corners are not inside one sphere grows the sphere that needs the
+   least growth until they are. A sphere is convex, so then every triangle — the whole surface — is
+   inside the union of spheres: clearance of the spheres ≥ m implies clearance of the surface ≥ m.
+
+k is the count ≤ ``max_spheres`` with the least total volume Σ r³ (a long link gets more spheres; a
+compact one, one). Lengths in metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import pinocchio as pin
+import trimesh
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+#: Longest triangle edge of the subdivided hull surfaces the spheres are fitted to (m).
+EDGE_M = 0.015
+#: Iterations of the enclosing-ball approximation per sphere.
+BALL_ITERATIONS = 400
+
+
+@dataclass(frozen=True)
+class BodySpheres:
+    """Spheres of one body: ``centers`` (k, 3) in the frame of ``joint`` (pinocchio joint index;
+    0 = the world), ``radii`` (k,) in m."""
+
+    name: str
+    joint: int
+    centers: Array
+    radii: Array
+
+
+def _subdivided(surfaces: list[trimesh.Trimesh]) -> tuple[Array, NDArray[np.int64]]:
+    """Vertices and triangles of the convex hulls of ``surfaces``, subdivided to edges ≤ EDGE_M."""
+    verts, tris, offset = [], [], 0
+    for mesh in surfaces:
+        hull = mesh.convex_hull
+        v, f = trimesh.remesh.subdivide_to_size(hull.vertices, hull.faces, max_edge=EDGE_M)
+        verts.append(v)
+        tris.append(f + offset)
+        offset += len(v)
+    return np.concatenate(verts), np.concatenate(tris).astype(np.int64)
+
+
+def _slab_spheres(points: Array, k: int) -> tuple[Array, Array]:
+    """At most k spheres over equal-width slabs of the points along their principal axis (step 2)."""
+    mean = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
+    s = (points - mean) @ vt[0]
+    edges = np.linspace(s.min(), s.max(), k + 1)
+    slab = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, k - 1)
+    centers, radii = [], []
+    for i in np.unique(slab):  # a slab without points (a gap in the shape) gets no sphere
+        c, r = _enclosing_ball(points[slab == i])
+        centers.append(c)
+        radii.append(r)
+    return np.array(centers), np.array(radii)
+
+
+def _enclosing_ball(points: Array) -> tuple[Array, float]:
+    """A ball holding all points, near the smallest one: Bădoiu–Clarkson, c ← c + (p_far − c)/(i + 1)
+    for :data:`BALL_ITERATIONS` steps (radius within ~1/sqrt(iterations) of the optimum); the radius
+    is the exact distance to the farthest point from the final centre."""
+    c = points.mean(axis=0)
+    for i in range(1, BALL_ITERATIONS + 1):
+        d = points - c
+        c = c + d[np.argmax(np.einsum("ij,ij->i", d, d))] / (i + 1)
+    return c, float(np.linalg.norm(points - c, axis=1).max())
+
+
+def _cover_triangles(points: Array, triangles: NDArray[np.int64], centers: Array, radii: Array) -> Array:
+    """Grow radii until every triangle's corners lie inside one sphere (step 3); the new radii."""
+    radii = radii.copy()
+    dist = np.linalg.norm(points[:, None, :] - centers[None, :, :], axis=2)  # (V, k)
+    need = dist[triangles].max(axis=1)  # (T, k): radius sphere j needs to hold triangle t
+    for t in np.flatnonzero(~np.any(need <= radii, axis=1)):
+        if np.any(need[t] <= radii):  # covered by an earlier growth
+            continue
+        j = int(np.argmin(need[t] - radii))
+        radii[j] = need[t, j]
+    return radii
+
+
+def fit_spheres(surfaces: list[trimesh.Trimesh], max_spheres: int) -> tuple[Array, Array]:
+    """Centres (k, 3) and radii (k,) of spheres covering the convex hulls of ``surfaces`` (all in
+    one frame, m): the k ≤ ``max_spheres`` with the least Σ r³ (module docstring)."""
+    points, triangles = _subdivided(surfaces)
+    best: tuple[float, Array, Array] | None = None
+    for k in range(1, max_spheres + 1):
+        centers, radii = _slab_spheres(points, k)
+        radii = _cover_triangles(points, triangles, centers, radii)
+        volume = float(np.sum(radii**3))
+        if best is None or volume < best[0]:
+            best = (volume, centers, radii)
+    assert best is not None
+    return best[1], best[2]
+
+
+class RobotSpheres:
+    """The spheres of every body of a robot, stacked: ``bodies`` (tuple of :class:`BodySpheres`),
+    ``joint`` (S,), ``centers`` (S, 3) in their joint frames, ``radii`` (S,), ``body`` (S,) index
+    into ``bodies``."""
+
+    def __init__(self, bodies: tuple[BodySpheres, ...]) -> None:
+        self.bodies = bodies
+        self.joint = np.concatenate([np.full(len(b.radii), b.joint) for b in bodies]).astype(int)
+        self.centers = np.concatenate([b.centers for b in bodies])
+        self.radii = np.concatenate([b.radii for b in bodies])
+        self.body = np.concatenate([np.full(len(b.radii), i) for i, b in enumerate(bodies)]).astype(int)
+
+    def __len__(self) -> int:
+        return len(self.radii)
+
+    def label(self, s: int) -> str:
+        """``<body>[<i>]``: the body's name and the sphere's index within the body."""
+        b = int(self.body[s])
+        return f"{self.bodies[b].name}[{s - int(np.flatnonzero(self.body == b)[0])}]"
+
+    def world_centers(self, model: pin.Model, data: pin.Data, q: ArrayLike) -> Array:
+        """Sphere centres (S, 3) in the world frame at pinocchio configuration q (pinocchio FK)."""
+        pin.forwardKinematics(model, data, np.asarray(q, float))
+        out = np.empty_like(self.centers)
+        for j in np.unique(self.joint):
+            m = data.oMi[int(j)]
+            sel = self.joint == j
+            out[sel] = self.centers[sel] @ m.rotation.T + m.translation
+        return out
+
+    def symbolic_centers(self, joint_poses: dict[int, tuple[ca.SX, ca.SX]]) -> list[ca.SX]:
+        """Sphere centres as CasADi 3×1 expressions from the joints' world poses (p, R), joint 0
+        (the world) implied."""
+        out = []
+        for j, c in zip(self.joint, self.centers, strict=True):
+            if j == 0:
+                out.append(ca.SX(ca.DM(c)))
+            else:
+                p, r = joint_poses[int(j)]
+                out.append(p + r @ ca.DM(c))
+        return out
