@@ -12,7 +12,11 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``aim``: angle between the light axis R e_z and O − a ≤ aim_rad;
   ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
 - ``path`` (when a planned path is given): distance from every sampled light position to the
-  polyline of planned light positions ≤ path_m.
+  polyline of planned light positions ≤ path_m;
+- with an environment check (exact coal distances, :meth:`optlight.environment.Environment.check`):
+  ``clearance`` (robot to obstacles), ``self_collision`` (robot to itself) and ``view_cone`` (robot
+  and light out of the camera's view of the object), each the allowed distance minus the smallest
+  distance over its pairs of bodies (m; positive = too close).
 
 A NaN anywhere (a broken trajectory or forward kinematics) fails the check it enters. A violation is
 recorded per *episode* (a run of consecutive failing samples of one joint or one
@@ -37,6 +41,12 @@ from optlight.planning.timing import Trajectory
 
 Array = NDArray[np.float64]
 LightPose = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+#: (q samples (T, n), times (T,), capture times) -> an EnvironmentReport (duck-typed: ``pairs`` and
+#: ``violations`` as in :mod:`optlight.environment.check`).
+EnvironmentCheck = Callable[[np.ndarray, np.ndarray, np.ndarray], Any]
+
+#: Check names of the environment pair kinds.
+ENVIRONMENT_CHECKS = {"obstacle": "clearance", "self": "self_collision", "view": "view_cone"}
 
 #: Episodes kept per check in :attr:`VerificationReport.violations`.
 MAX_EPISODES = 5
@@ -178,6 +188,7 @@ def verify_trajectory(
     sphere: LightSphere,
     landmark_positions: ArrayLike,
     planned_path: ArrayLike | None = None,
+    environment: EnvironmentCheck | None = None,
     rate_hz: float = 1000.0,
     tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
 ) -> VerificationReport:
@@ -193,6 +204,7 @@ def verify_trajectory(
         landmark_positions: (M, 3) light positions (m, world) of the landmarks, in visiting order.
         planned_path: (K, 3) light positions (m, world) along the planned path, or None to skip the
             path check.
+        environment: exact clearance / self-collision / view-cone check of the samples, or None.
         rate_hz: resampling rate, at least 1000 Hz.
         tol: the tolerances.
     """
@@ -309,6 +321,8 @@ def verify_trajectory(
         )
     else:
         skipped = ("path",)
+    if environment is not None:
+        _environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
 
     return VerificationReport(
         checks=collector.checks,
@@ -320,6 +334,33 @@ def verify_trajectory(
         skipped=skipped,
         elapsed_s=time.perf_counter() - start,
     )
+
+
+def _environment_checks(collector: _Collector, report: Any, samples: int) -> None:
+    """One check per pair kind of an environment report: the allowed distance minus its worst pair's
+    distance (m), failing samples summed over the pairs; the report's episodes become violations."""
+    for kind, name in ENVIRONMENT_CHECKS.items():
+        pairs = [p for p in report.pairs if p.kind == kind]
+        if not pairs:
+            continue
+        worst = min(pairs, key=lambda p: p.min_distance_m - p.threshold_m)
+        collector.checks[name] = CheckResult(
+            name=name,
+            measure="allowed distance minus the smallest distance (positive: too close)",
+            unit="m",
+            max_value=-(worst.min_distance_m - worst.threshold_m),
+            limit=0.0,
+            time_s=worst.time_s,
+            joint=f"{worst.first} ↔ {worst.second}",
+            failing_samples=sum(p.failing_samples for p in pairs),
+            episodes=sum(1 for v in report.violations if v.kind == kind),
+            samples=samples,
+        )
+        collector.violations.extend(
+            Violation(name, v.time_s, f"{v.first} ↔ {v.second}", v.distance_m, v.threshold_m, v.message)
+            for v in report.violations
+            if v.kind == kind
+        )
 
 
 def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:

@@ -7,7 +7,10 @@ position and rotation from the symbolic forward kinematics:
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
-- joint bounds, and |θ_{k+1} − θ_k| ≤ max_step per joint.
+- joint bounds, and |θ_{k+1} − θ_k| ≤ max_step per joint;
+- with an environment (:mod:`optlight.environment`): clearance c(θ_k) ≥ 0 at every knot (robot
+  spheres to obstacles and to each other, margins included) and the view cone kept clear,
+  v(θ_k) ≥ 0, at the landmark knots (view "capture") or at every knot (view "path").
 
 Cost Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² + w Σ_k |θ_k − θ_ref|². With W_j = 1/v_max,j² (the
 pipeline's choice) the first term is the squared time each step takes at the velocity limits, a
@@ -57,7 +60,10 @@ class TrajectoryOptimizer:
     """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots).
 
     ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
-    ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1). Solvers are cached, so solving many paths of the same size reuses one.
+    ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1);
+    ``clearance`` and ``view`` are CasADi functions θ → distances (≥ 0 is safe) from
+    :class:`optlight.environment.Environment`. Solvers are cached, so solving many paths of the same
+    size reuses one.
     """
 
     def __init__(
@@ -68,6 +74,9 @@ class TrajectoryOptimizer:
         max_step: float = 0.25,
         posture_weight: float = 1e-6,
         joint_weights: NDArray[np.float64] | None = None,
+        clearance: ca.Function | None = None,
+        view: ca.Function | None = None,
+        view_mode: str = "capture",
         max_iter: int = 300,
         tol: float = 1e-8,
         verbose: bool = False,
@@ -77,6 +86,9 @@ class TrajectoryOptimizer:
         self.max_step = float(max_step)
         self.posture_weight = float(posture_weight)
         self.joint_weights = np.ones(robot.n) if joint_weights is None else np.asarray(joint_weights, float)
+        self.clearance = clearance
+        self.view = view
+        self.view_mode = view_mode
         self.options = {
             "ipopt.max_iter": int(max_iter),
             "ipopt.tol": float(tol),
@@ -141,6 +153,11 @@ class TrajectoryOptimizer:
         if self.path_mode == "arc":
             interior = [k for k in range(n_knots) if k not in set(landmark_knots)]
             constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
+        if self.clearance is not None:
+            constraints.append(ca.vec(self.clearance.map(n_knots)(theta)))
+        if self.view is not None:
+            knots = list(range(n_knots)) if self.view_mode == "path" else list(landmark_knots)
+            constraints.append(ca.vec(self.view.map(len(knots))(theta[:, knots])))
         dtheta = theta[:, 1:] - theta[:, :-1]
         posture = theta - ca.repmat(theta_ref, 1, n_knots)
         w = ca.DM(np.sqrt(self.joint_weights))
@@ -158,6 +175,13 @@ class TrajectoryOptimizer:
             n_int = n_knots - n_landmarks
             lbg += [np.zeros(n_int), np.zeros(2 * n_int)]
             ubg += [np.zeros(n_int), np.full(2 * n_int, np.inf)]
+        rows = 0
+        if self.clearance is not None:
+            rows += self.clearance.size1_out(0) * n_knots
+        if self.view is not None:
+            rows += self.view.size1_out(0) * (n_knots if self.view_mode == "path" else n_landmarks)
+        lbg.append(np.zeros(rows))
+        ubg.append(np.full(rows, np.inf))
         return np.concatenate(lbg), np.concatenate(ubg)
 
     def solve(self, path: LightPath, sphere: LightSphere, theta0: Array) -> TrajectoryNLPResult:
