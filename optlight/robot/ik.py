@@ -92,18 +92,21 @@ def null_space_step(jacobian: Array, error: Array, gamma: Array | None, damping:
     """
     a = jacobian @ jacobian.T
     m = len(a)
-    x = _solve(a + damping * _EYE[m], error)
+    _, _, x, info = _gesv(a + damping * _EYE[m], error)
+    if info != 0:
+        x = _lstsq(a + damping * _EYE[m], error)
     if gamma is None:
         return cast(Array, jacobian.T @ x)
-    return cast(Array, gamma + jacobian.T @ (x - _solve(a + _EPS_EYE[m], jacobian @ gamma)))
+    jg = jacobian @ gamma
+    _, _, y, info = _gesv(a + _EPS_EYE[m], jg)
+    if info != 0:
+        y = _lstsq(a + _EPS_EYE[m], jg)
+    return cast(Array, gamma + jacobian.T @ (x - y))
 
 
-def _solve(a: Array, b: Array) -> Array:
-    """x = a⁻¹ b for a small symmetric positive definite a."""
-    _, _, x, info = _gesv(a, b)
-    if info != 0:  # singular: only when J has no usable column and λ = 0
-        return cast(Array, np.linalg.lstsq(a, b, rcond=None)[0])
-    return cast(Array, x)
+def _lstsq(a: Array, b: Array) -> Array:
+    """Least-squares a⁻¹ b where LAPACK found ``a`` singular (J without a usable column and λ = 0)."""
+    return cast(Array, np.linalg.lstsq(a, b, rcond=None)[0])
 
 
 def _limit_side(theta: Array, lower: Array, upper: Array) -> Array | None:

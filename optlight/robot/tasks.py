@@ -117,14 +117,15 @@ class LightPointingTask:
         self.axis = axis / np.linalg.norm(axis)
         self.weight = float(sphere.radius if orientation_weight is None else orientation_weight)
         self._rows = np.array([1.0, 1.0, 1.0, self.weight, self.weight])[:, None]
+        self._vectors = np.array([self.target, self.axis])  # row 0 becomes a* − a_L below
 
     def error_and_jacobian(self, state: KinematicState) -> tuple[Array, Array]:
         """(e (5,), J (5, n)) at ``state``: position error in m, pointing error in weighted rad."""
-        r = state.rotation
-        dx, dy, dz = (self.axis @ r).tolist()
+        vectors = self._vectors
+        np.subtract(self.target, state.position, out=vectors[0])
+        (px, py, pz), (dx, dy, dz) = (vectors @ state.rotation).tolist()  # R_WLᵀ (a* − a_L), R_WLᵀ d*
         s = math.hypot(dx, dy)
         k = self.weight * (math.atan2(s, dz) / s if s > 1e-12 else 1.0)
-        px, py, pz = ((self.target - state.position) @ r).tolist()
         return np.array([px, py, pz, -k * dy, k * dx]), self._rows * state.local_jacobian[:5]
 
 
