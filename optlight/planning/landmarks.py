@@ -82,7 +82,9 @@ class Landmark:
 
     ``cost``: the objective there (NumPy renderer, shadow rays, the camera's resolution).
     ``status``: "refined" when an IPOPT solution won, "polished" when the camera-resolution polish
-    did, "sweep" when a sweep sample did.
+    did, "sweep" when a sweep sample did; "placed" when the robot could not reach the search's
+    landmark and the joint-space placement (:mod:`optlight.planning.placement`) moved it along its
+    azimuth to the best light the robot reaches.
     ``solver_status``: IPOPT's return status of the winning solve (of the first solve when the sweep
     won; "" when no solve ran). ``iterations``: IPOPT iterations over all solves of this landmark.
     ``time_s``: wall time of this landmark's own work (azimuth mode: its sweep included; free mode:
@@ -93,7 +95,7 @@ class Landmark:
     azimuth: float
     position: Array
     cost: float
-    status: Literal["refined", "polished", "sweep"]
+    status: Literal["refined", "polished", "sweep", "placed"]
     solver_status: str
     iterations: int
     time_s: float
