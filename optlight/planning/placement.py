@@ -1,0 +1,323 @@
+"""Joint-space light placement (DESIGN §5, the design's NLP): the best light the robot can reach.
+
+Variables: the joint angles θ (n, rad). With a(θ), R(θ) the light's position (m) and rotation from the
+symbolic forward kinematics (:attr:`Robot.symbolic_light_pose`) and u(θ) = R_WSᵀ (a(θ) − O) / b the
+light's direction in the sphere frame (unit when h = 0):
+
+    min_θ  D̃(a(θ), v)
+    s.t.   h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0              on the sphere, aimed at O (DESIGN §3)
+           −sin φ u_x + cos φ u_y = 0,   cos φ u_x + sin φ u_y ≥ 0   in the half-plane of azimuth φ
+           cos θ_max ≤ u_z ≤ cos θ_min                             the allowed zenith range
+           lower ≤ θ ≤ upper                                       joint limits
+
+``D̃`` is the differentiable objective (:attr:`Objective.function`: smooth max and clip) at the
+landmark search's resolution (:func:`optlight.planning.landmarks.search_scene`), so a sphere-space
+landmark the robot reaches is a solution of this NLP too. The two azimuth rows are linear in u: the
+equality puts the light in the plane through the pole at azimuth φ, the inequality keeps it on the
+φ side of the pole (not at φ + π). At the pole (u_x = u_y = 0) every azimuth holds, as on the sphere.
+
+Azimuth free. The same solver with both azimuth rows switched off through their bounds
+(−∞ ≤ g ≤ ∞): one graph and one ``nlpsol``, as :class:`~optlight.planning.landmarks.CapRefiner`
+switches off its unused separation rows. A second solver would only drop two cheap rows, at the
+price of building, and keeping consistent, a second NLP.
+
+Parameters p = (φ, v): the azimuth (rad) and the cast-shadow visibility mask v (P,) at the search
+resolution. The mask is fixed during a solve: shadow rays at the warm start's light direction, and
+when the mask at the solution differs the NLP is solved once more from the solution with the mask
+there (:data:`VISIBILITY_ROUNDS`). The NLP is built once and reused for every solve.
+
+Reach boundary. When the light the objective wants is out of reach, the NLP's optimum lies on the
+boundary of the reachable set, which is a fold of the kinematics: there the 5-D light task Jacobian
+(position and optical axis, over the joints not at a limit) loses rank, the light cannot move outwards,
+and a trajectory NLP that pins a landmark there fails (IPOPT: Error_In_Step_Computation, seen on the
+default face with a low base; pinned 0.02° inside it converged). So a solution whose Jacobian is
+singular (σ_min/σ_max < :data:`SINGULAR_TOL`) is moved :data:`BOUNDARY_MARGIN` back along its meridian,
+to the side the generalized IK reaches from the solution, then solved again with the zenith pinned there
+(the zenith row's bounds) from the IK's angles, to the NLP's accuracy and with a non-singular Jacobian;
+the lower cost wins when both sides qualify. A solution with no such side is not a success.
+
+Reported numbers: ``cost`` is the objective of the NumPy render with shadow rays at the camera's
+resolution (as :func:`~optlight.planning.landmarks.exact_cost`), of the light where pinocchio's forward
+kinematics puts it; ``max_h_residual`` is |h|∞ (m) from pinocchio, independent of the CasADi mirror.
+
+Angles are radians, lengths metres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.geometry import h_residual
+from optlight.objectives import Objective
+from optlight.planning.landmarks import _ipopt_options, _run, exact_cost, search_scene
+from optlight.robot import KinematicState, Robot, generalized_ik, ik_settings
+from optlight.scene import Scene
+from optlight.spec import Problem
+
+Array = NDArray[np.float64]
+
+#: Largest number of IPOPT solves per placement: the first with the mask at the warm start, then
+#: one more when the mask at its solution differs.
+VISIBILITY_ROUNDS = 2
+#: Largest |h|∞ (m) of a successful placement, checked with pinocchio.
+H_TOL = 1e-8
+#: σ_min/σ_max of the 5-D light task Jacobian below which the light is on the reach boundary (0.1°
+#: inside the boundary found on the default face the ratio is ~9e-3; on it, ~5e-8).
+SINGULAR_TOL = 1e-3
+#: How far (rad) a light on the reach boundary is moved back inside, along its meridian.
+BOUNDARY_MARGIN = math.radians(0.1)
+#: A joint closer than this (rad or m) to a limit is taken as held by it (IPOPT's interior point stops
+#: ~1e-8 inside an active bound).
+AT_LIMIT = 1e-6
+#: IPOPT's absolute constraint tolerance (m for h, unit-sphere units for the direction rows), also
+#: at its "acceptable" stop.
+CONSTRAINT_TOL = 1e-10
+#: The cost-scale sample: zeniths from θ_min to θ_max at each of as many azimuths (see
+#: :func:`_objective_scale`).
+SCALE_ZENITHS, SCALE_AZIMUTHS = 4, 8
+
+
+@dataclass(frozen=True)
+class PlacementResult:
+    """One placement: joint angles ``theta`` (n, rad, within the limits) and where they put the light:
+    ``position`` (world, m), ``zenith``/``azimuth`` (rad, azimuth in [0, 2π)) seen from O.
+
+    ``cost``: the objective there (NumPy renderer, shadow rays, the camera's resolution).
+    ``success``: IPOPT converged, |h|∞ ≤ :data:`H_TOL`, θ within the joint limits and the light off
+    the reach boundary (see the module docstring). ``status``: IPOPT's return status of the solve
+    kept. ``message``: what happened, in words. ``on_boundary``: the NLP's optimum was on the reach
+    boundary (the light was then moved :data:`BOUNDARY_MARGIN` inside, when it could be).
+    ``iterations``: IPOPT's, over all solves. ``max_h_residual``: |h(θ)|∞ (m, pinocchio).
+    ``conditioning``: σ_min/σ_max of the 5-D light task Jacobian over the free joints at θ.
+    ``time_s``: wall time of :meth:`LightPlacement.solve`.
+    """
+
+    theta: Array
+    position: Array
+    zenith: float
+    azimuth: float
+    cost: float
+    success: bool
+    status: str
+    message: str
+    on_boundary: bool
+    iterations: int
+    max_h_residual: float
+    conditioning: float
+    time_s: float
+
+
+class LightPlacement:
+    """The joint-space placement NLP of ``robot`` (see the module docstring), built once.
+
+    ``scene`` is the problem's scene at the camera's resolution (reported costs). ``objective``
+    (default: the problem's) is an objective over ``scene``'s pixels; when given, the NLP renders at
+    ``scene``'s own resolution (its reference and pixel selection belong to those pixels), otherwise
+    at the landmark search's resolution with the problem's objective built there.
+    """
+
+    def __init__(
+        self, problem: Problem, scene: Scene, robot: Robot, objective: Objective | None = None
+    ) -> None:
+        self.problem = problem
+        self.scene = scene
+        self.robot = robot
+        self.sphere = sphere = scene.sphere
+        if objective is None:
+            self.objective = Objective.from_problem(problem, scene)
+            self.search = search_scene(problem, scene)
+            self.search_objective = (
+                self.objective if self.search is scene else Objective.from_problem(problem, self.search)
+            )
+        else:
+            self.objective = self.search_objective = objective
+            self.search = scene
+
+        theta = ca.MX.sym("theta", robot.n)
+        visibility = ca.MX.sym("v", self.search.gbuffer.size)
+        a, rot = robot.symbolic_light_pose(theta)
+        #: CasADi Function (θ (n), v (P)) -> D̃(a(θ), v): the NLP's cost, at the search resolution.
+        self.cost_function = ca.Function(
+            "placement_cost",
+            [theta, visibility],
+            [self.search_objective.function(a, visibility)],
+            ["theta", "v"],
+            ["cost"],
+        )
+        p = ca.MX.sym("p", 1 + self.search.gbuffer.size)
+        phi = p[0]
+        center = ca.DM(sphere.center)
+        h = rot.T @ (center - a) - ca.DM([0.0, 0.0, sphere.radius])
+        u = ca.DM(sphere.rotation.T) @ (a - center) / sphere.radius
+        plane = -ca.sin(phi) * u[0] + ca.cos(phi) * u[1]
+        side = ca.cos(phi) * u[0] + ca.sin(phi) * u[1]
+        cost = self.cost_function(theta, p[1:])
+        self.objective_scale = _objective_scale(self.search, self.search_objective)
+        options = _ipopt_options(problem.solver) | {
+            "ipopt.obj_scaling_factor": self.objective_scale,
+            "ipopt.constr_viol_tol": CONSTRAINT_TOL,
+            "ipopt.acceptable_constr_viol_tol": CONSTRAINT_TOL,
+        }
+        nlp = {"x": theta, "p": p, "f": cost, "g": ca.vertcat(h, plane, side, u[2])}
+        self.nlp = ca.nlpsol("light_placement", "ipopt", nlp, options)
+        self._ik = ik_settings(problem.solver)
+        # g = [h (3), plane, side, u_z]; "free" switches the two azimuth rows off through their bounds.
+        # A zenith bound at the pole (θ_min = 0, θ_max = π) is implied by h = 0 and dropped: u_z ≤ 1 is
+        # active there with a gradient that vanishes on the sphere, which stalls IPOPT (no LICQ).
+        lo = math.cos(sphere.zenith_max) if sphere.zenith_max < math.pi else -np.inf
+        hi = math.cos(sphere.zenith_min) if sphere.zenith_min > 0.0 else np.inf
+        self._bounds = {
+            "fixed": (np.array([0.0, 0.0, 0.0, 0.0, 0.0, lo]), np.array([0.0, 0.0, 0.0, 0.0, np.inf, hi])),
+            "free": (
+                np.array([0.0, 0.0, 0.0, -np.inf, -np.inf, lo]),
+                np.array([0.0, 0.0, 0.0, np.inf, np.inf, hi]),
+            ),
+        }
+
+    def solve(self, azimuth: float | None, theta0: ArrayLike) -> PlacementResult:
+        """The best light on the half-plane of ``azimuth`` (rad; None: anywhere on the allowed cap)
+        that the robot reaches, IPOPT warm-started at ``theta0`` (n, rad): a local optimum, the one
+        ``theta0`` leads to, kept off the reach boundary. Never raises for an unreachable azimuth:
+        returns ``success=False`` and says why in ``message``."""
+        t0 = time.perf_counter()
+        lbg, ubg = self._bounds["free" if azimuth is None else "fixed"]
+        phi = 0.0 if azimuth is None else float(azimuth)
+        bounds = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
+        theta = np.asarray(theta0, float)
+        mask = self.search.visibility(self._on_sphere(self.robot.light_pose(theta)[0]))
+        best: PlacementResult | None = None
+        iterations = 0
+        for _ in range(VISIBILITY_ROUNDS):
+            run = _run(self.nlp, {"x0": theta, "p": np.r_[phi, mask], **bounds})
+            iterations += run.iterations
+            candidate = self._result(run.x, run.success, run.status)
+            # a failed re-solve never replaces a success; among successes the lower cost wins
+            if best is None or (candidate.success and (not best.success or candidate.cost < best.cost)):
+                best = candidate
+            if not candidate.success:  # failed, or on the reach boundary: reachability holds the light there
+                break
+            new_mask = self.search.visibility(candidate.position)
+            if np.array_equal(new_mask, mask):
+                break
+            theta, mask = run.x, new_mask
+        assert best is not None  # VISIBILITY_ROUNDS ≥ 1
+        if best.on_boundary:
+            best, more = self._step_inside(best, best.azimuth if azimuth is None else phi)
+            iterations += more
+        return dataclasses.replace(best, iterations=iterations, time_s=time.perf_counter() - t0)
+
+    def conditioning(self, theta: ArrayLike) -> float:
+        """σ_min/σ_max of the 5-D light task Jacobian at θ (the generalized IK's: rows 0–4 of
+        pinocchio's LOCAL Jacobian of the light, the two optical-axis rows times b, so every row is
+        in m/rad) over the joints farther than :data:`AT_LIMIT` from their limits; 0 when fewer than
+        5 are. Near 0 on the boundary of the reachable set."""
+        theta = np.asarray(theta, float)
+        free = (theta > self.robot.lower + AT_LIMIT) & (theta < self.robot.upper - AT_LIMIT)
+        if free.sum() < 5:
+            return 0.0
+        jacobian = KinematicState.compute(self.robot, theta).local_jacobian[:5, free]
+        sigma = np.linalg.svd(
+            jacobian * np.array([1.0, 1.0, 1.0, self.sphere.radius, self.sphere.radius])[:, None]
+        )[1]
+        return float(sigma[-1] / sigma[0])
+
+    def _on_sphere(self, position: Array) -> Array:
+        """The point of the sphere in the direction of ``position`` from O (the warm start's light may
+        be off the sphere)."""
+        d = position - self.sphere.center
+        return self.sphere.center + self.sphere.radius * d / np.linalg.norm(d)
+
+    def _result(self, theta: Array, converged: bool, status: str) -> PlacementResult:
+        """The placement at ``theta``, checked and scored independently of the NLP (``iterations`` and
+        ``time_s`` are the caller's to fill)."""
+        position, rotation = self.robot.light_pose(theta)
+        h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
+        zenith, azimuth = self.sphere.angles(position)
+        conditioning = self.conditioning(theta)
+        feasible = h <= H_TOL and self.robot.within_limits(theta, tol=0.0)
+        # IPOPT rarely certifies a point of the reach boundary (no constraint qualification there, so no
+        # multipliers): a feasible singular iterate is on it whether IPOPT converged or stopped
+        on_boundary = feasible and conditioning < SINGULAR_TOL
+        if on_boundary:
+            message = f"on the reach boundary (σ_min/σ_max = {conditioning:.1e}, IPOPT: {status})"
+        elif not converged:
+            message = f"IPOPT: {status}, |h| = {h:.1e} m"
+        elif not feasible:
+            message = f"IPOPT: {status}, but |h| = {h:.1e} m or θ outside the joint limits"
+        else:
+            message = f"IPOPT: {status}"
+        return PlacementResult(
+            theta=theta,
+            position=position,
+            zenith=float(zenith),
+            azimuth=float(azimuth),
+            cost=exact_cost(self.scene, self.objective, position),
+            success=converged and feasible and not on_boundary,
+            status=status,
+            message=message,
+            on_boundary=on_boundary,
+            iterations=0,
+            max_h_residual=h,
+            conditioning=conditioning,
+            time_s=0.0,
+        )
+
+    def _step_inside(self, boundary: PlacementResult, azimuth: float) -> tuple[PlacementResult, int]:
+        """The light :data:`BOUNDARY_MARGIN` from ``boundary`` along the meridian of ``azimuth`` (rad),
+        on the side where the generalized IK (the problem's settings, from ``boundary.theta``, no
+        restarts) reaches it and the NLP, with the zenith pinned there through its row's bounds and
+        warm-started from the IK, converges to a non-singular configuration; the cheaper side when
+        both do. ``boundary`` itself, not a success, when neither does. Also returns the IPOPT
+        iterations spent."""
+        lbg, ubg = (b.copy() for b in self._bounds["fixed"])
+        lit = np.ones(self.search.gbuffer.size)  # the light is pinned: the mask changes nothing
+        inside, iterations = [], 0
+        for zenith in (boundary.zenith - BOUNDARY_MARGIN, boundary.zenith + BOUNDARY_MARGIN):
+            if not self.sphere.zenith_min <= zenith <= self.sphere.zenith_max:
+                continue
+            ik = generalized_ik(
+                self.robot, self.sphere, (zenith, azimuth), boundary.theta, **self._ik, restarts=False
+            )
+            if not ik.success:
+                continue
+            lbg[-1] = ubg[-1] = math.cos(zenith)
+            args = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
+            run = _run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
+            iterations += run.iterations
+            inside.append(self._result(run.x, run.success, run.status))
+        inside = [r for r in inside if r.success]
+        margin = math.degrees(BOUNDARY_MARGIN)
+        if not inside:
+            message = f"{boundary.message}, and no reachable light {margin:g}° inside it"
+            return dataclasses.replace(boundary, message=message), iterations
+        best = min(inside, key=lambda r: r.cost)
+        message = f"{boundary.message}: moved {margin:g}° inside it"
+        return dataclasses.replace(best, on_boundary=True, message=message), iterations
+
+
+def _objective_scale(scene: Scene, objective: Objective) -> float:
+    """IPOPT's objective scaling factor: 1 / the median cost over a coarse grid of the allowed cap
+    (:data:`SCALE_ZENITHS` × :data:`SCALE_AZIMUTHS` lights, NumPy renderer with shadow rays); 1 when
+    that median is 0.
+
+    Histogram distances are ~1e-4–1e-1 on the cap, so unscaled the Lagrangian's curvature is the
+    constraints' and L-BFGS creeps along the reachable set: from the IK solutions of the 22 landmarks
+    the panda reaches (default face, 8 landmarks, 3 bases) IPOPT needed median 10, max 291 iterations
+    unscaled, and median 7, max 14 with this scale (115 there; the median is 4e-3–6e-2 on the built-in
+    problems). A fixed 1e2–1e4 did as well on the default face, but the scale follows the objective.
+    """
+    sphere = scene.sphere
+    zenith, azimuth = np.meshgrid(
+        np.linspace(sphere.zenith_min, sphere.zenith_max, SCALE_ZENITHS),
+        np.linspace(0.0, 2 * np.pi, SCALE_AZIMUTHS, endpoint=False),
+    )
+    positions = sphere.position(zenith.ravel(), azimuth.ravel())
+    median = float(np.median(objective.numpy_batch(np.stack([scene.pixels(a) for a in positions]))))
+    return 1.0 / median if median > 0.0 else 1.0

@@ -1,0 +1,184 @@
+"""Joint-space light placement: it reproduces reachable landmarks, its solutions meet h = 0 (checked with
+pinocchio), the azimuth and the limits, the NLP is built once, its gradient is right, and an optimum
+out of reach is kept off the reach boundary."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from optlight.geometry import h_residual
+from optlight.planning import placement as placement_module
+from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
+from optlight.planning.placement import LightPlacement, PlacementResult
+from optlight.robot import Robot, generalized_ik, load_robot
+from optlight.scene import Scene
+from optlight.spec import Problem, load_problem, problem_from_dict
+
+#: A base 0.9 m below the light ring, on the camera side, found by probing with the IK: the light
+#: reaches every azimuth near the pole, but not the 45° and 135° landmarks (zenith 7.6°) of the 8.
+LOW_BASE = [-0.603, -0.55, -0.45]
+
+
+def small_problem(count: int = 8, **sections: dict[str, Any]) -> Problem:
+    """The default problem with a 64² camera searched at its own resolution (so the placement NLP and
+    the landmark search share one model) and ``count`` landmarks."""
+    default = load_problem("default")
+    data = default.to_dict()
+    data["camera"].update(width=64, height=64)
+    data["landmarks"].update(count=count, resolution=64)
+    for section, values in sections.items():
+        data[section].update(values)
+    return problem_from_dict(data, source=default.source)
+
+
+class Setup:
+    """A problem with its scene, robot, landmarks and placement NLP."""
+
+    def __init__(self, problem: Problem) -> None:
+        self.problem = problem
+        self.scene = Scene.from_problem(problem)
+        self.sphere = self.scene.sphere
+        self.robot: Robot = load_robot(problem)
+        self.landmarks: LandmarkSet = find_landmarks(problem, self.scene)
+        self.placement = LightPlacement(problem, self.scene, self.robot)
+
+
+@pytest.fixture(scope="module")
+def default() -> Setup:
+    return Setup(small_problem())
+
+
+@pytest.fixture(scope="module")
+def low() -> Setup:
+    return Setup(small_problem(robot={"base_position_m": LOW_BASE}))
+
+
+def assert_feasible(setup: Setup, result: PlacementResult, azimuth: float | None) -> None:
+    """h = 0 by pinocchio (not the CasADi mirror the NLP used), the azimuth half-plane, the zenith
+    range and the joint limits, and the reported position, angles and cost."""
+    robot, sphere = setup.robot, setup.sphere
+    assert result.success, result.message
+    position, rotation = robot.light_pose(result.theta)
+    assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < 1e-8
+    np.testing.assert_allclose(result.position, position, atol=1e-12)
+    assert robot.within_limits(result.theta, tol=0.0)
+    u = sphere.rotation.T @ (position - sphere.center) / sphere.radius
+    assert sphere.zenith_min - 1e-8 <= math.acos(min(1.0, u[2])) <= sphere.zenith_max + 1e-8
+    if azimuth is not None:
+        assert abs(-math.sin(azimuth) * u[0] + math.cos(azimuth) * u[1]) < 1e-9
+        assert math.cos(azimuth) * u[0] + math.sin(azimuth) * u[1] >= -1e-9
+    zenith, phi = sphere.angles(position)
+    assert result.zenith == pytest.approx(float(zenith), abs=1e-12)
+    assert result.azimuth == pytest.approx(float(phi), abs=1e-12)
+    assert result.cost == pytest.approx(
+        exact_cost(setup.scene, setup.placement.objective, position), rel=1e-12
+    )
+
+
+@pytest.mark.parametrize("offset_deg", [0.0, 3.0])
+def test_reachable_landmarks_are_reproduced(default: Setup, offset_deg: float) -> None:
+    """Warm-started at the IK solution of the landmark (or of a light 3° farther from the pole), the NLP
+    on the landmark's azimuth returns to the landmark."""
+    for lm in default.landmarks.landmarks:
+        start = generalized_ik(
+            default.robot,
+            default.sphere,
+            (lm.zenith + math.radians(offset_deg), lm.azimuth),
+            default.robot.theta_ref,
+        )
+        assert start.success
+        result = default.placement.solve(lm.azimuth, start.theta)
+        assert_feasible(default, result, lm.azimuth)
+        assert math.degrees(abs(result.zenith - lm.zenith)) < 0.2
+        assert result.cost <= lm.cost * (1 + 1e-6) + 1e-8
+        assert 0 < result.iterations < 60
+
+
+def test_free_azimuth_finds_the_reference_light(default: Setup) -> None:
+    """With the azimuth free the NLP descends to the reference light (10° zenith) or its mirror image
+    (the face is mirror-symmetric), where the cost vanishes."""
+    result = default.placement.solve(None, default.robot.theta_ref)
+    assert_feasible(default, result, None)
+    assert result.cost < 1e-7
+    assert math.degrees(result.zenith) == pytest.approx(10.0, abs=0.2)
+    assert min(result.azimuth, abs(result.azimuth - math.pi), 2 * math.pi - result.azimuth) < math.radians(
+        0.5
+    )
+
+
+def test_nlp_built_once(default: Setup, monkeypatch: pytest.MonkeyPatch) -> None:
+    built: list[str] = []
+    real = ca.nlpsol
+
+    def counting(*args: Any, **kwargs: Any) -> Any:
+        built.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(placement_module.ca, "nlpsol", counting)
+    placement = LightPlacement(default.problem, default.scene, default.robot)
+    theta = default.robot.theta_ref
+    for azimuth in (0.0, math.pi / 2, None, 3 * math.pi / 2):
+        result = placement.solve(azimuth, theta)
+        assert result.success
+        theta = result.theta
+    assert built == ["light_placement"]
+
+
+def test_search_resolution_is_the_landmark_search_one() -> None:
+    problem = small_problem(count=1, landmarks={"resolution": 40})
+    placement = LightPlacement(problem, Scene.from_problem(problem), load_robot(problem))
+    assert (placement.search.camera.width, placement.search.camera.height) == (40, 40)
+    assert (placement.scene.camera.width, placement.scene.camera.height) == (64, 64)
+
+
+def test_cost_gradient_matches_finite_differences(default: Setup) -> None:
+    robot, placement = default.robot, default.placement
+    rng = np.random.default_rng(7)
+    theta = robot.random_configuration(rng)
+    position = robot.light_pose(theta)[0]
+    v = placement.search.visibility(position)
+    # the NLP's cost is the objective of the light where pinocchio puts it
+    expected = float(placement.search_objective.function(position, v))
+    assert float(placement.cost_function(theta, v)) == pytest.approx(expected, rel=1e-12)
+    x = ca.MX.sym("theta", robot.n)
+    gradient = ca.Function("gradient", [x], [ca.gradient(placement.cost_function(x, v), x)])
+    analytic = np.asarray(gradient(theta), float).ravel()
+    step = 1e-6
+    numeric = np.array(
+        [
+            (
+                float(placement.cost_function(theta + step * e, v))
+                - float(placement.cost_function(theta - step * e, v))
+            )
+            / (2 * step)
+            for e in np.eye(robot.n)
+        ]
+    )
+    assert np.abs(analytic).max() > 1e-6
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-5, atol=1e-6 * np.abs(analytic).max())
+
+
+def test_out_of_reach_optimum_is_kept_off_the_reach_boundary(low: Setup) -> None:
+    """The landmark at 45° is out of reach: the NLP's optimum lies on the reach boundary, where the light
+    task is singular, and the light ends 0.1° inside it, non-singular and cheaper than any reachable light
+    nearer the pole."""
+    robot, sphere, lm = low.robot, low.sphere, low.landmarks.landmarks[1]
+    start = generalized_ik(robot, sphere, lm.position, robot.theta_ref)
+    assert not start.success
+    result = low.placement.solve(lm.azimuth, start.theta)
+    assert_feasible(low, result, lm.azimuth)
+    assert result.on_boundary and result.message.endswith("moved 0.1° inside it")
+    assert result.conditioning >= placement_module.SINGULAR_TOL
+    # 0.1° on the other side of the boundary the light is out of reach
+    beyond = result.zenith + 2 * placement_module.BOUNDARY_MARGIN
+    assert not generalized_ik(robot, sphere, (beyond, lm.azimuth), result.theta).success
+    nearer = [
+        exact_cost(low.scene, low.placement.objective, sphere.position(z, lm.azimuth))
+        for z in (0.0, result.zenith / 2)
+    ]
+    assert result.cost < min(nearer)
