@@ -19,7 +19,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +30,7 @@ from optlight.errors import SolverError, UnreachableError
 from optlight.geometry import LightSphere
 from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
 from optlight.planning.path import LightPath, azimuth_order, build_path, shortest_open_tour
+from optlight.planning.placement import LightPlacement
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, TrajectoryOptimizer
 from optlight.robot import IKResult, Robot, generalized_ik, load_robot
@@ -138,34 +139,75 @@ def _ik(
 
 
 def place_landmarks(
-    problem: Problem, robot: Robot, sphere: LightSphere, landmarks: Sequence[Landmark]
+    problem: Problem,
+    robot: Robot,
+    sphere: LightSphere,
+    landmarks: Sequence[Landmark],
+    *,
+    scene: Scene | None = None,
 ) -> tuple[list[Landmark], Array, list[str]]:
-    """Joint angles at each landmark (IK chained in the given order, retried from θ_ref).
+    """Joint angles at each landmark: IK chained in the given order, retried from θ_ref.
+
+    Where both IK attempts fail, the joint-space placement NLP (:class:`LightPlacement`) runs on the
+    landmark's azimuth, warm-started from the attempt with the smaller residual: when it succeeds the
+    landmark is replaced by the best light the robot reaches on that azimuth, kept off the singular
+    reach boundary (status "placed", its cost; a warning says how far it moved and why). The NLP is
+    built on the first such landmark and reused; ``scene`` (the problem's, camera resolution) is
+    built from ``problem`` then when not given.
 
     Returns the landmarks kept, their joint angles (M, n) and warnings. Raises
-    :class:`UnreachableError` naming the first unreachable landmark unless ``allow_partial``.
+    :class:`UnreachableError` naming the first landmark neither IK nor the placement reaches (with
+    both reasons), unless ``allow_partial``, which drops it with a warning.
     """
     kept, thetas, notes = [], [], []
+    placement: LightPlacement | None = None
     previous = robot.theta_ref
     for lm in landmarks:
         result = _ik(robot, sphere, lm.position, previous, problem)
         if not result.success:
-            result = _ik(robot, sphere, lm.position, robot.theta_ref, problem)
-        if not result.success:
-            where = (
-                f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
-                f"{np.rad2deg(lm.azimuth):.1f}°) is out of reach of {robot.name}: {result.message}"
-            )
-            if not problem.landmarks.allow_partial:
-                raise UnreachableError(
-                    f"{where}; move the robot base ([robot] base_position_m), shrink the zenith range "
-                    "([light_sphere] zenith_max_deg) or set [landmarks] allow_partial = true"
-                )
-            notes.append(f"dropped {where}")
+            retry = _ik(robot, sphere, lm.position, robot.theta_ref, problem)
+            result = retry if retry.success or retry.residual < result.residual else result
+        if result.success:
+            kept.append(lm)
+            thetas.append(result.theta)
+            previous = result.theta
             continue
-        kept.append(lm)
-        thetas.append(result.theta)
-        previous = result.theta
+        if placement is None:
+            scene = scene if scene is not None else Scene.from_problem(problem)
+            placement = LightPlacement(problem, scene, robot)
+        placed = placement.solve(lm.azimuth, result.theta)
+        if placed.success:
+            kept.append(
+                replace(
+                    lm,
+                    zenith=placed.zenith,
+                    position=placed.position,
+                    cost=placed.cost,
+                    status="placed",
+                    solver_status=placed.status,
+                    iterations=lm.iterations + placed.iterations,
+                    time_s=lm.time_s + placed.time_s,
+                )
+            )
+            thetas.append(placed.theta)
+            previous = placed.theta
+            notes.append(
+                f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) moved from zenith "
+                f"{np.rad2deg(lm.zenith):.1f}° to {np.rad2deg(placed.zenith):.1f}° to be reachable by "
+                f"{robot.name} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
+            )
+            continue
+        where = (
+            f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
+            f"{np.rad2deg(lm.azimuth):.1f}°) is out of reach of {robot.name}: {result.message}; nor is any "
+            f"light on its azimuth within zenith {np.rad2deg(sphere.zenith_min):.1f}–"
+            f"{np.rad2deg(sphere.zenith_max):.1f}° (placement NLP: {placed.message})"
+        )
+        if not problem.landmarks.allow_partial:
+            raise UnreachableError(
+                f"{where}; move the robot base ([robot] base_position_m) or set [landmarks] allow_partial = true"
+            )
+        notes.append(f"dropped {where}")
     if len(kept) < 1:
         raise UnreachableError(f"no landmark is reachable by {robot.name}")
     return kept, np.array(thetas), notes

@@ -1,17 +1,21 @@
 """Joint-space light placement: it reproduces reachable landmarks, its solutions meet h = 0 (checked with
-pinocchio), the azimuth and the limits, the NLP is built once, its gradient is right, and an optimum
-out of reach is kept off the reach boundary."""
+pinocchio), the azimuth and the limits, the NLP is built once, its gradient is right, and the pipeline
+moves a landmark the robot cannot reach along its azimuth, or names it when nothing there is reachable."""
 
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import casadi as ca
 import numpy as np
 import pytest
 
+import optlight
+from optlight.errors import UnreachableError
 from optlight.geometry import h_residual
+from optlight.pipeline import place_landmarks
 from optlight.planning import placement as placement_module
 from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
 from optlight.planning.placement import LightPlacement, PlacementResult
@@ -182,3 +186,77 @@ def test_out_of_reach_optimum_is_kept_off_the_reach_boundary(low: Setup) -> None
         for z in (0.0, result.zenith / 2)
     ]
     assert result.cost < min(nearer)
+
+
+def test_unreachable_landmark_moves_along_its_azimuth(low: Setup) -> None:
+    robot, sphere, landmarks = low.robot, low.sphere, low.landmarks.landmarks
+    moved = [1, 3]
+    for j in moved:  # the landmark is out of reach, the light at half its zenith is not
+        lm = landmarks[j]
+        assert not generalized_ik(robot, sphere, lm.position, robot.theta_ref).success
+        assert generalized_ik(robot, sphere, (lm.zenith / 2, lm.azimuth), robot.theta_ref).success
+    kept, thetas, notes = place_landmarks(low.problem, robot, sphere, landmarks, scene=low.scene)
+    assert [lm.index for lm in kept] == list(range(len(landmarks)))
+    assert [lm.index for lm in kept if lm.status == "placed"] == moved
+    assert len(notes) == len(moved)
+    for j, note in zip(moved, notes, strict=True):
+        before, after = landmarks[j], kept[j]
+        assert note.startswith(
+            f"landmark {j} (azimuth {math.degrees(before.azimuth):.1f}°) moved from zenith "
+            f"{math.degrees(before.zenith):.1f}° to {math.degrees(after.zenith):.1f}° to be reachable"
+        )
+        assert after.azimuth == before.azimuth
+        assert math.radians(0.5) < before.zenith - after.zenith
+        assert after.cost == pytest.approx(
+            exact_cost(low.scene, low.placement.objective, after.position), rel=1e-12
+        )
+        assert after.iterations > before.iterations
+        position, rotation = robot.light_pose(thetas[j])
+        assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < 1e-8
+        assert low.placement.conditioning(thetas[j]) >= placement_module.SINGULAR_TOL
+    # every landmark kept is where the robot puts the light, to the IK's accuracy (|e|² < ik_tol)
+    accuracy = 2 * math.sqrt(low.problem.solver.ik_tol)
+    for lm, theta in zip(kept, thetas, strict=True):
+        position, rotation = robot.light_pose(theta)
+        assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < accuracy
+        np.testing.assert_allclose(position, lm.position, atol=accuracy)
+        assert robot.within_limits(theta, tol=0.0)
+
+
+def test_the_pipeline_plans_through_moved_landmarks(low: Setup) -> None:
+    """The whole job with the low base: the two landmarks out of reach are moved, the trajectory NLP pins
+    them (kept off the singular reach boundary, where it failed) and the plan passes verification."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan = optlight.solve(low.problem)
+    assert plan.nlp.success and plan.verification.passed
+    assert sorted(lm.index for lm in plan.visited if lm.status == "placed") == [1, 3]
+    moved = [w for w in plan.warnings if "to be reachable" in w]
+    assert len(moved) == 2 and all(any(m == str(w.message) for w in caught) for m in moved)
+
+
+def test_azimuth_out_of_reach_is_named_or_dropped() -> None:
+    """From 20° zenith up, the low base reaches only the 270° azimuth of four."""
+    setup = Setup(
+        small_problem(count=4, robot={"base_position_m": LOW_BASE}, light_sphere={"zenith_min_deg": 20.0})
+    )
+    args = (setup.problem, setup.robot, setup.sphere, setup.landmarks.landmarks)
+    with pytest.raises(
+        UnreachableError,
+        match=r"landmark 0 \(zenith 20\.0°, azimuth 0\.0°\) is out of reach of panda: .*; nor is any light "
+        r"on its azimuth within zenith 20\.0–60\.0° \(placement NLP: ",
+    ):
+        place_landmarks(*args)  # the placement NLP builds its own scene
+    partial = small_problem(
+        count=4,
+        robot={"base_position_m": LOW_BASE},
+        light_sphere={"zenith_min_deg": 20.0},
+        landmarks={"allow_partial": True},
+    )
+    kept, thetas, notes = place_landmarks(partial, *args[1:], scene=setup.scene)
+    assert [lm.index for lm in kept] == [3] and thetas.shape == (1, setup.robot.n)
+    assert [note.split(" (")[0] for note in notes] == [
+        "dropped landmark 0",
+        "dropped landmark 1",
+        "dropped landmark 2",
+    ]
