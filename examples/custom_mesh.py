@@ -18,8 +18,6 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
-from numpy.typing import NDArray
-from PIL import Image
 
 import optlight
 
@@ -77,13 +75,6 @@ def relief_mesh(size: float = 0.18, n: int = 91) -> trimesh.Trimesh:
     return trimesh.Trimesh(vertices, faces, vertex_colors=colors, process=False)
 
 
-def save_png(path: Path, image: NDArray[np.float64], saturation: float) -> Path:
-    """Write an (H, W) luminance image as 8-bit grey (0 → black, ``saturation`` → white)."""
-    pixels = np.clip(image / saturation, 0.0, 1.0)
-    Image.fromarray(np.round(255 * pixels).astype(np.uint8)).save(path)  # 2-D uint8: mode L
-    return path
-
-
 def main() -> None:
     """Make the mesh and its problem, render it under a few lights, find the landmarks."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -113,7 +104,7 @@ def main() -> None:
         light = scene.sphere.position(np.deg2rad(zenith), np.deg2rad(azimuth))
         pixels = scene.pixels(light)
         shadowed = 1.0 - float(np.mean(scene.visibility(light)))
-        path = save_png(
+        path = optlight.save_gray_png(
             args.out / f"render_z{zenith:02.0f}_a{azimuth:03.0f}.png", scene.to_image(pixels), saturation
         )
         print(

@@ -19,7 +19,6 @@ from pathlib import Path
 import numpy as np
 
 import optlight
-from optlight.report import make_preview
 
 
 def main() -> None:
@@ -63,7 +62,7 @@ def main() -> None:
     print(f"wrote {len(written)} files to {args.out}/ (open {args.out / 'preview.html'} in a browser)")
 
     if args.view:
-        with make_preview(plan, optlight.Preview).serve() as url:
+        with plan.preview().serve() as url:
             print(f"live preview at {url} — press Enter (or Ctrl-C) to stop")
             try:
                 input()

@@ -21,16 +21,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from PIL import Image
 
 import optlight
-
-
-def save_png(path: Path, image: NDArray[np.float64], saturation: float) -> Path:
-    """Write an (H, W) luminance image as 8-bit grey (0 → black, ``saturation`` → white)."""
-    pixels = np.clip(image / saturation, 0.0, 1.0)
-    Image.fromarray(np.round(255 * pixels).astype(np.uint8)).save(path)  # 2-D uint8: mode L
-    return path
 
 
 def angle_deg(a: NDArray[np.float64], b: NDArray[np.float64], center: NDArray[np.float64]) -> float:
@@ -62,7 +54,7 @@ def main() -> None:
     image = scene.render(truth) + rng.normal(
         0.0, args.noise * saturation, (scene.camera.height, scene.camera.width)
     )
-    reference = save_png(args.out / "reference.png", image, saturation)
+    reference = optlight.save_gray_png(args.out / "reference.png", image, saturation)
     print(
         f"reference image {reference}: light at zenith {args.zenith:g}°, azimuth {args.azimuth:g}°, "
         f"noise σ {args.noise:g}"
@@ -94,7 +86,7 @@ def main() -> None:
     best = min(landmarks.landmarks, key=lambda lm: lm.cost)
     error = angle_deg(best.position, truth, scene.sphere.center)
     print(f"best landmark recovers the reference light within {error:.2f}°")
-    print(f"wrote {save_png(args.out / 'best.png', scene.render(best.position), saturation)}")
+    print(f"wrote {optlight.save_gray_png(args.out / 'best.png', scene.render(best.position), saturation)}")
 
     if args.view:
         robot = optlight.load_robot(problem)

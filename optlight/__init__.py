@@ -25,7 +25,7 @@ from optlight.errors import (
     VerificationError,
 )
 from optlight.geometry import LightSphere
-from optlight.spec import Problem, available_problems, load_problem
+from optlight.spec import Problem, available_problems, load_problem, problem_from_dict
 
 if TYPE_CHECKING:
     from optlight.objectives import Objective
@@ -35,6 +35,7 @@ if TYPE_CHECKING:
     from optlight.robot import IKResult, ReachabilityMap, Robot, generalized_ik, load_robot, reachability_map
     from optlight.scene import Camera, Scene
     from optlight.verify import VerificationReport, verify_trajectory
+    from optlight.viz.images import save_gray_png
     from optlight.viz.preview import Preview
 
 __version__ = "0.1.0"
@@ -59,6 +60,7 @@ _LAZY = {
     "Plan": "optlight.pipeline",
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
+    "save_gray_png": "optlight.viz.images",
 }
 
 
@@ -96,6 +98,8 @@ __all__ = [
     "find_landmarks",
     "generalized_ik",
     "load_problem",
+    "problem_from_dict",
+    "save_gray_png",
     "load_robot",
     "reachability_map",
     "solve",

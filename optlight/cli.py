@@ -77,10 +77,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         plan.save(out, overwrite=True)  # refuses (VerificationError) when verification failed
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
-        from optlight.report import make_preview
-        from optlight.viz.preview import Preview
-
-        with make_preview(plan, Preview).serve() as url:
+        with plan.preview().serve() as url:
             console.print(f"live preview at {url} — press Ctrl-C to stop")
             _wait_for_interrupt()
     return 0

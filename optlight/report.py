@@ -152,9 +152,7 @@ def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, previe
         return save_landmark_figures(plan.landmarks, plan.scene, folder)
 
     def preview_html(folder: Path) -> list[Path]:
-        from optlight.viz.preview import Preview
-
-        return [make_preview(plan, Preview).save_html(folder / "preview.html")]
+        return [plan.preview().save_html(folder / "preview.html")]
 
     def report(folder: Path) -> list[Path]:
         names = sorted(p.name for p in folder.glob("*.png"))
@@ -174,17 +172,4 @@ def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, previe
         figures=figures,
         writers=writers,
         overwrite=overwrite,
-    )
-
-
-def make_preview(plan: Plan, preview_cls: Any) -> Any:
-    """The Meshcat preview of a plan: landmarks coloured by cost, the planned path, the animation."""
-    return preview_cls(
-        plan.scene,
-        plan.robot,
-        np.array([lm.position for lm in plan.visited]),
-        np.array([lm.cost for lm in plan.visited]),
-        plan.path.positions,
-        plan.trajectory,
-        light_position=plan.visited[0].position,
     )
