@@ -5,13 +5,16 @@ Stages (each timed in ``Plan.timings``):
 1. ``scene``: camera, object, G-buffer;
 2. ``landmarks``: where the light should go (:func:`optlight.planning.landmarks.find_landmarks`);
 3. ``placement``: joint angles at every landmark by generalized IK (5-D task, roll free), chained
-   from one landmark to the next; a landmark the robot cannot reach is an error that names it, or is
-   dropped with a warning when ``[landmarks] allow_partial`` is set;
+   from one landmark to the next; where IK cannot reach a landmark, the joint-space placement NLP
+   moves it to the best reachable light on its azimuth (with a warning); a landmark neither reaches
+   is an error that names it, or is dropped with a warning when ``[landmarks] allow_partial`` is set;
 4. ``path``: visiting order (azimuth, or a short open tour in joint space), great-circle knots, and
    per-knot IK along the path (the paper's pipeline, and the NLP's warm start);
-5. ``nlp``: the trajectory NLP over all knots (:class:`TrajectoryOptimizer`);
+5. ``nlp``: the trajectory NLP over all knots (:class:`TrajectoryOptimizer`), with clearance and
+   view-cone constraints when ``[environment] enabled``;
 6. ``timing``: TOPPRA per landmark pair with a dwell at every landmark;
-7. ``verify``: dense resampling, independent of the planner.
+7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
+   environment).
 """
 
 from __future__ import annotations
@@ -21,11 +24,12 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from optlight.environment import Environment
 from optlight.errors import SolverError, UnreachableError
 from optlight.geometry import LightSphere
 from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
@@ -37,6 +41,9 @@ from optlight.robot import IKResult, Robot, generalized_ik, load_robot
 from optlight.scene import Scene
 from optlight.spec import Problem, load_problem
 from optlight.verify import VerificationReport, verify_trajectory
+
+if TYPE_CHECKING:
+    from optlight.viz.preview import Preview
 
 Array = NDArray[np.float64]
 
@@ -106,8 +113,28 @@ class Plan:
             "duration_s": self.trajectory.duration,
             "motion_time_s": self.motion_time,
             "verification_passed": self.verification.passed,
+            "min_clearance_m": {
+                name: -check.max_value
+                for name, check in self.verification.checks.items()
+                if name in ("clearance", "self_collision", "view_cone")
+            },
             "timings_s": dict(self.timings),
         }
+
+    def preview(self) -> Preview:
+        """The Meshcat preview: landmarks coloured by cost, the planned path, the trajectory as an
+        animation, the object shaded for the first capture. ``.save_html(path)`` or ``.serve()``."""
+        from optlight.viz.preview import Preview
+
+        return Preview(
+            self.scene,
+            self.robot,
+            np.array([lm.position for lm in self.visited]),
+            np.array([lm.cost for lm in self.visited]),
+            self.path.positions,
+            self.trajectory,
+            light_position=self.visited[0].position,
+        )
 
     def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
         """Write the results folder (see :func:`optlight.report.save_plan`); refused when the plan
@@ -123,7 +150,13 @@ def joint_path_length(theta: Array) -> float:
 
 
 def _ik(
-    robot: Robot, sphere: LightSphere, target: Array, theta0: Array, problem: Problem, *, restarts: bool = True
+    robot: Robot,
+    sphere: LightSphere,
+    target: Array,
+    theta0: Array,
+    problem: Problem,
+    *,
+    restarts: bool = True,
 ) -> IKResult:
     s = problem.solver
     return generalized_ik(
@@ -262,6 +295,7 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     scene = Scene.from_problem(problem)
     robot = load_robot(problem)
     sphere = scene.sphere
+    environment = Environment.from_problem(problem) if problem.environment.enabled else None
     done()
 
     start = time.perf_counter()
@@ -269,7 +303,7 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     timings["landmarks"] = time.perf_counter() - start
 
     done = stage("placement")
-    kept, thetas, notes = place_landmarks(problem, robot, sphere, landmarks.landmarks)
+    kept, thetas, notes = place_landmarks(problem, robot, sphere, landmarks.landmarks, scene=scene)
     done()
 
     done = stage("path")
@@ -291,7 +325,11 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
         robot,
         path_mode=problem.trajectory.path,
         max_step=problem.trajectory.max_step_rad,
-        joint_weights=1.0 / (robot.velocity_limit * problem.robot.velocity_scale) ** 2,
+        # (v̄ / v_j)²: time at the velocity limits, scaled to order 1 (IPOPT converges more reliably)
+        joint_weights=(np.mean(robot.velocity_limit) / robot.velocity_limit) ** 2,
+        clearance=environment.clearance_function(robot) if environment else None,
+        view=environment.view_cone_function(robot) if environment and environment.view_cone else None,
+        view_mode=environment.view_mode if environment else "capture",
         max_iter=problem.solver.max_iter,
         tol=problem.solver.tol,
         verbose=problem.solver.verbose,
@@ -306,7 +344,8 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     done()
 
     done = stage("timing")
-    segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]
+    # a single landmark is a segment of zero length: the trajectory is its dwell
+    segments = [nlp.theta[s] for s in path.segments()] or [np.repeat(nlp.theta[:1], 2, axis=0)]
     trajectory = time_parameterize(
         segments,
         robot.velocity_limit * problem.robot.velocity_scale,
@@ -328,6 +367,11 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
         sphere=sphere,
         landmark_positions=np.array([lm.position for lm in visited]),
         planned_path=planned,
+        environment=(
+            (lambda q, t, captures: environment.check(robot, q, t, capture_times=captures))
+            if environment
+            else None
+        ),
     )
     done()
     timings["total"] = time.perf_counter() - t_total

@@ -99,19 +99,23 @@ def test_a_compressed_trajectory_is_refused(plan: optlight.Plan, tmp_path: Path)
     assert not any(tmp_path.iterdir()), "nothing may be written for a failing plan"
 
 
-#: A base 0.9 m below the light ring, on the camera side: the lower landmarks are within reach, the upper
-#: ones are not (checked with the IK when this was written).
+#: A base 0.9 m below the light ring, on the camera side: from 10° zenith up it reaches the lower landmarks,
+#: and no light at all on the upper azimuths (checked with the IK when this was written; nearer the pole
+#: it reaches every azimuth, and the placement NLP would move those landmarks there instead).
 LOW_BASE = [-0.603, -0.55, -0.45]
+ABOVE_10_DEG = {"zenith_min_deg": 10.0}
 
 
 def test_unreachable_landmark_is_named() -> None:
-    far = small_problem(robot={"base_position_m": LOW_BASE})
+    far = small_problem(robot={"base_position_m": LOW_BASE}, light_sphere=ABOVE_10_DEG)
     with pytest.raises(UnreachableError, match=r"landmark \d+ \(zenith .*°, azimuth .*°\) is out of reach"):
         optlight.solve(far)
 
 
 def test_partial_plans_drop_unreachable_landmarks_with_a_warning() -> None:
-    far = small_problem(robot={"base_position_m": LOW_BASE}, landmarks={"allow_partial": True})
+    far = small_problem(
+        robot={"base_position_m": LOW_BASE}, light_sphere=ABOVE_10_DEG, landmarks={"allow_partial": True}
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         plan = optlight.solve(far)

@@ -12,9 +12,10 @@ position and rotation from the symbolic forward kinematics:
   spheres to obstacles and to each other, margins included) and the view cone kept clear,
   v(θ_k) ≥ 0, at the landmark knots (view "capture") or at every knot (view "path").
 
-Cost Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² + w Σ_k |θ_k − θ_ref|². With W_j = 1/v_max,j² (the
-pipeline's choice) the first term is the squared time each step takes at the velocity limits, a
-smooth stand-in for the motion time TOPPRA will find; the small posture term settles the null space.
+Cost Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² + w Σ_k |θ_k − θ_ref|². With W_j ∝ 1/v_max,j² (the
+pipeline's choice, scaled to mean order 1) the first term is the squared time each step takes at the
+velocity limits, a smooth stand-in for the motion time TOPPRA will find; the small posture term
+settles the null space.
 The per-knot constraints are one SX function mapped over the knots, so the graph stays small.
 """
 
