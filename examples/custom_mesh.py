@@ -137,14 +137,7 @@ def main() -> None:
             theta=ik.theta,
             light_position=best.position,
         )
-        with preview.serve() as url:
-            print(
-                f"live preview at {url} (light at the lowest-cost landmark) — press Enter (or Ctrl-C) to stop"
-            )
-            try:
-                input()
-            except (KeyboardInterrupt, EOFError):
-                pass
+        preview.show("light at the lowest-cost landmark")
 
 
 if __name__ == "__main__":

@@ -153,15 +153,7 @@ def main() -> None:
         preview = optlight.Preview(
             scene, robot, positions, margins, np.empty((0, 3)), theta=thetas[label][-1]
         )
-        with preview.serve() as url:
-            print(
-                f"live preview at {url}: targets coloured by joint-limit margin and the robot at the last "
-                f"target ({label}) — press Enter (or Ctrl-C) to stop"
-            )
-            try:
-                input()
-            except (KeyboardInterrupt, EOFError):
-                pass
+        preview.show(f"targets coloured by joint-limit margin, the robot at the last target ({label})")
 
 
 if __name__ == "__main__":

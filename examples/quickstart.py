@@ -62,12 +62,7 @@ def main() -> None:
     print(f"wrote {len(written)} files to {args.out}/ (open {args.out / 'preview.html'} in a browser)")
 
     if args.view:
-        with plan.preview().serve() as url:
-            print(f"live preview at {url} — press Enter (or Ctrl-C) to stop")
-            try:
-                input()
-            except (KeyboardInterrupt, EOFError):
-                pass
+        plan.preview().show()
 
 
 if __name__ == "__main__":

@@ -121,12 +121,7 @@ def main() -> None:
         preview = optlight.Preview(
             scene, robot, landmarks, costs, path, trajectory, light_position=landmarks[0]
         )
-        with preview.serve() as url:
-            print(f"live preview of the trajectory read back at {url} — press Enter (or Ctrl-C) to stop")
-            try:
-                input()
-            except (KeyboardInterrupt, EOFError):
-                pass
+        preview.show("the trajectory read back")
 
 
 if __name__ == "__main__":

@@ -102,15 +102,7 @@ def main() -> None:
             theta=ik.theta,
             light_position=best.position,
         )
-        with preview.serve() as url:
-            print(
-                f"live preview at {url} (robot holding the light at the best landmark) — "
-                "press Enter (or Ctrl-C) to stop"
-            )
-            try:
-                input()
-            except (KeyboardInterrupt, EOFError):
-                pass
+        preview.show("robot holding the light at the best landmark")
 
 
 if __name__ == "__main__":

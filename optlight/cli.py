@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -77,9 +76,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         plan.save(out, overwrite=True)  # refuses (VerificationError) when verification failed
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
-        with plan.preview().serve() as url:
-            console.print(f"live preview at {url} — press Ctrl-C to stop")
-            _wait_for_interrupt()
+        plan.preview().show()
     return 0
 
 
@@ -99,14 +96,6 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),
     ]
-
-
-def _wait_for_interrupt() -> None:
-    try:
-        while True:
-            time.sleep(0.5)
-    except KeyboardInterrupt:
-        pass
 
 
 def _cmd_reach(args: argparse.Namespace) -> int:

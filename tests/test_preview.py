@@ -256,3 +256,19 @@ def test_server_that_cannot_start_is_reported(monkeypatch):
     monkeypatch.setattr("optlight.viz.server.sys.executable", "/bin/false")
     with pytest.raises(OptlightError, match="did not start"), MeshcatServer(start_timeout_s=5.0):
         pass
+
+
+def test_show_serves_until_enter_then_stops(preview, monkeypatch, capsys):
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    seen = {}
+
+    def enter() -> str:  # the user presses Enter while the server runs
+        children = [p for p in psutil.Process().children(recursive=True) if p.pid not in before]
+        seen["servers"] = len(children)
+        return ""
+
+    monkeypatch.setattr("builtins.input", enter)
+    preview.show("test")
+    assert seen["servers"] == 1
+    assert "live preview at http://127.0.0.1:" in capsys.readouterr().out
+    assert {p.pid for p in psutil.Process().children(recursive=True)} <= before

@@ -204,6 +204,16 @@ class Preview:
             server.send(self._recorder.commands())
             yield server.web_url
 
+    def show(self, what: str = "") -> None:
+        """Serve the scene live (:meth:`serve`), print its URL and wait until the user presses Enter
+        or Ctrl-C (or standard input closes); the server stops then. ``what`` says what is shown."""
+        with self.serve() as url:
+            print(f"live preview at {url}{f' ({what})' if what else ''} — press Enter (or Ctrl-C) to stop")
+            try:
+                input()
+            except (KeyboardInterrupt, EOFError):
+                pass
+
     # ------------------------------------------------------------------ scene content
     def _light_placement(self, theta: ArrayLike) -> pin.SE3:
         model = self.robot.model
