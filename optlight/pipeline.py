@@ -269,6 +269,55 @@ def knot_ik(
     return thetas, failures
 
 
+def optimize_knots(
+    problem: Problem,
+    robot: Robot,
+    sphere: LightSphere,
+    path: LightPath,
+    warm: Array,
+    environment: Environment | None,
+) -> TrajectoryNLPResult:
+    """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm``.
+
+    Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits). With an
+    environment the NLP is solved twice: first without it, then with the clearance and view-cone rows
+    from that solution (a continuation: the free optimum is smooth and mostly clear, which the
+    constrained solve converges from far better than from the per-knot IK); when that fails, from the
+    per-knot IK itself. Raises :class:`SolverError` when no solve succeeds.
+    """
+
+    def optimizer(environment: Environment | None) -> TrajectoryOptimizer:
+        return TrajectoryOptimizer(
+            robot,
+            path_mode=problem.trajectory.path,
+            max_step=problem.trajectory.max_step_rad,
+            joint_weights=1.0 / (robot.velocity_limit * problem.robot.velocity_scale) ** 2,
+            clearance=environment.clearance_function(robot) if environment else None,
+            view=environment.view_cone_function(robot) if environment and environment.view_cone else None,
+            view_mode=environment.view_mode if environment else "capture",
+            max_iter=problem.solver.max_iter,
+            tol=problem.solver.tol,
+            verbose=problem.solver.verbose,
+        )
+
+    nlp = optimizer(None).solve(path, sphere, warm)
+    if environment is not None:
+        constrained = optimizer(environment)
+        start = nlp.theta if nlp.success else warm
+        free_time = nlp.time_s
+        nlp = constrained.solve(path, sphere, start)
+        if not nlp.success and start is not warm:
+            nlp = constrained.solve(path, sphere, warm)
+        nlp = replace(nlp, time_s=nlp.time_s + free_time)
+    if not nlp.success:
+        raise SolverError(
+            f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
+            f"max |h| = {nlp.max_h_residual:.2e} m); try a smaller [trajectory] knot_spacing_deg, a "
+            'larger max_step_rad or path = "free"'
+        )
+    return nlp
+
+
 def solve(problem: Problem | str | Path, *, progress: Progress | None = None) -> Plan:
     """Solve a problem (a :class:`Problem`, a file path or a built-in name) end to end.
 
@@ -321,26 +370,7 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     done()
 
     done = stage("nlp")
-    optimizer = TrajectoryOptimizer(
-        robot,
-        path_mode=problem.trajectory.path,
-        max_step=problem.trajectory.max_step_rad,
-        # (v̄ / v_j)²: time at the velocity limits, scaled to order 1 (IPOPT converges more reliably)
-        joint_weights=(np.mean(robot.velocity_limit) / robot.velocity_limit) ** 2,
-        clearance=environment.clearance_function(robot) if environment else None,
-        view=environment.view_cone_function(robot) if environment and environment.view_cone else None,
-        view_mode=environment.view_mode if environment else "capture",
-        max_iter=problem.solver.max_iter,
-        tol=problem.solver.tol,
-        verbose=problem.solver.verbose,
-    )
-    nlp = optimizer.solve(path, sphere, warm)
-    if not nlp.success:
-        raise SolverError(
-            f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
-            f"max |h| = {nlp.max_h_residual:.2e} m); try a smaller [trajectory] knot_spacing_deg, a "
-            'larger max_step_rad or path = "free"'
-        )
+    nlp = optimize_knots(problem, robot, sphere, path, warm, environment)
     done()
 
     done = stage("timing")
