@@ -215,6 +215,25 @@ class Environment:
         own = [f"{sp.label(s)} ↔ {sp.label(t)}" for s, t in cm.self_rows]
         return obs + own
 
+    def view_labels(self, robot: Robot) -> list[str]:
+        """One label per row of :meth:`view_cone_function`: ``"<body>[i] ↔ view_cone"`` (empty when
+        the view cone is off)."""
+        if self.view_cone is None:
+            return []
+        cm = self.collision_model(robot)
+        return [f"{cm.spheres.label(s)} ↔ {VIEW_CONE}" for s in cm.view_rows]
+
+    def worst_sphere_row(self, robot: Robot, theta: ArrayLike) -> tuple[float, str]:
+        """The smallest row of :meth:`sphere_clearance` at θ (rad), clearance and view rows together,
+        and its label (:meth:`clearance_labels`, :meth:`view_labels`): (m, label); (inf, "") when
+        there are no rows. Negative means the spheres at θ break a margin or enter the view cone."""
+        clearance, view = self.sphere_clearance(robot, theta)
+        rows = np.concatenate([clearance, view])
+        if rows.size == 0:
+            return math.inf, ""
+        k = int(np.argmin(rows))
+        return float(rows[k]), (self.clearance_labels(robot) + self.view_labels(robot))[k]
+
     def clearance_function(self, robot: Robot) -> ca.Function:
         """``casadi.Function("clearance", [theta (n×1)], [c (m×1)])``, m = obstacle rows + self rows
         (:meth:`clearance_labels`): c ≥ 0 means every sphere clears every obstacle by ``margin`` and

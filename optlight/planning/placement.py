@@ -8,6 +8,7 @@ light's direction in the sphere frame (unit when h = 0):
     s.t.   h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0              on the sphere, aimed at O (DESIGN §3)
            −sin φ u_x + cos φ u_y = 0,   cos φ u_x + sin φ u_y ≥ 0   in the half-plane of azimuth φ
            cos θ_max ≤ u_z ≤ cos θ_min                             the allowed zenith range
+           c(θ) ≥ 0,   v(θ) ≥ 0                                     clearance, view (environment on)
            lower ≤ θ ≤ upper                                       joint limits
 
 ``D̃`` is the differentiable objective (:attr:`Objective.function`: smooth max and clip) at the
@@ -15,6 +16,15 @@ landmark search's resolution (:func:`optlight.planning.landmarks.search_scene`),
 landmark the robot reaches is a solution of this NLP too. The two azimuth rows are linear in u: the
 equality puts the light in the plane through the pole at azimuth φ, the inequality keeps it on the
 φ side of the pole (not at φ + π). At the pole (u_x = u_y = 0) every azimuth holds, as on the sphere.
+
+Environment. When the problem's ``[environment] enabled`` is set, the rows of the trajectory NLP's
+environment (:class:`~optlight.environment.Environment`) join: the clearance c(θ) (m; robot spheres to
+the obstacles minus ``margin``, sphere pairs of the self pairs minus ``self_margin``) and, unless the
+view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres to the camera's view
+cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
+modes. A landmark whose light the robot only reaches by colliding or blocking the camera then moves
+along its azimuth to the best light it reaches clear of both, exactly as an unreachable one does; the
+trajectory NLP, which pins its landmark knots, could not do that itself.
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
 (−∞ ≤ g ≤ ∞): one graph and one ``nlpsol``, as :class:`~optlight.planning.landmarks.CapRefiner`
@@ -54,6 +64,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from optlight.environment import Environment
 from optlight.geometry import h_residual
 from optlight.objectives import Objective
 from optlight.planning.landmarks import _ipopt_options, _run, exact_cost, search_scene
@@ -79,6 +90,11 @@ AT_LIMIT = 1e-6
 #: IPOPT's absolute constraint tolerance (m for h, unit-sphere units for the direction rows), also
 #: at its "acceptable" stop.
 CONSTRAINT_TOL = 1e-10
+#: Smallest environment row (m) of a successful placement, checked with pinocchio (IPOPT stops
+#: ~1e-10 outside its feasible set, :data:`CONSTRAINT_TOL`).
+CLEARANCE_TOL = 1e-8
+#: Index of the zenith row u_z in the NLP's constraints g = [h (3), plane, side, u_z, c, v].
+ZENITH_ROW = 5
 #: The cost-scale sample: zeniths from θ_min to θ_max at each of as many azimuths (see
 #: :func:`_objective_scale`).
 SCALE_ZENITHS, SCALE_AZIMUTHS = 4, 8
@@ -90,13 +106,16 @@ class PlacementResult:
     ``position`` (world, m), ``zenith``/``azimuth`` (rad, azimuth in [0, 2π)) seen from O.
 
     ``cost``: the objective there (NumPy renderer, shadow rays, the camera's resolution).
-    ``success``: IPOPT converged, |h|∞ ≤ :data:`H_TOL`, θ within the joint limits and the light off
-    the reach boundary (see the module docstring). ``status``: IPOPT's return status of the solve
-    kept. ``message``: what happened, in words. ``on_boundary``: the NLP's optimum was on the reach
+    ``success``: IPOPT converged, |h|∞ ≤ :data:`H_TOL`, the environment's rows ≥
+    −:data:`CLEARANCE_TOL` (when it is on) and the light off the reach boundary (see the module
+    docstring); θ is within the joint limits. ``status``: IPOPT's return status of the solve kept.
+    ``message``: what happened, in words. ``on_boundary``: the NLP's optimum was on the reach
     boundary (the light was then moved :data:`BOUNDARY_MARGIN` inside, when it could be).
     ``iterations``: IPOPT's, over all solves. ``max_h_residual``: |h(θ)|∞ (m, pinocchio).
     ``conditioning``: σ_min/σ_max of the 5-D light task Jacobian over the free joints at θ.
-    ``time_s``: wall time of :meth:`LightPlacement.solve`.
+    ``min_clearance_m``: the smallest environment row (clearance and view, sphere model, m) at θ and
+    ``clearance_row`` its label; inf and "" without an environment. ``time_s``: wall time of
+    :meth:`LightPlacement.solve`.
     """
 
     theta: Array
@@ -111,6 +130,8 @@ class PlacementResult:
     iterations: int
     max_h_residual: float
     conditioning: float
+    min_clearance_m: float
+    clearance_row: str
     time_s: float
 
 
@@ -120,11 +141,19 @@ class LightPlacement:
     ``scene`` is the problem's scene at the camera's resolution (reported costs). ``objective``
     (default: the problem's) is an objective over ``scene``'s pixels; when given, the NLP renders at
     ``scene``'s own resolution (its reference and pixel selection belong to those pixels), otherwise
-    at the landmark search's resolution with the problem's objective built there.
+    at the landmark search's resolution with the problem's objective built there. ``environment``
+    (default: built from the problem) adds its clearance and view rows when the problem's
+    ``[environment] enabled`` is set; it is ignored otherwise.
     """
 
     def __init__(
-        self, problem: Problem, scene: Scene, robot: Robot, objective: Objective | None = None
+        self,
+        problem: Problem,
+        scene: Scene,
+        robot: Robot,
+        objective: Objective | None = None,
+        *,
+        environment: Environment | None = None,
     ) -> None:
         self.problem = problem
         self.scene = scene
@@ -165,19 +194,37 @@ class LightPlacement:
             "ipopt.constr_viol_tol": CONSTRAINT_TOL,
             "ipopt.acceptable_constr_viol_tol": CONSTRAINT_TOL,
         }
-        nlp = {"x": theta, "p": p, "f": cost, "g": ca.vertcat(h, plane, side, u[2])}
+        #: The problem's environment when enabled (its rows are constraints), else None.
+        self.environment = (
+            (environment if environment is not None else Environment.from_problem(problem))
+            if problem.environment.enabled
+            else None
+        )
+        rows = [h, plane, side, u[2]]
+        if self.environment is not None:
+            rows.append(self.environment.clearance_function(robot)(theta))
+            if self.environment.view_cone is not None:
+                rows.append(self.environment.view_cone_function(robot)(theta))
+        g = ca.vertcat(*rows)
+        n_env = g.size1() - (ZENITH_ROW + 1)
+        nlp = {"x": theta, "p": p, "f": cost, "g": g}
         self.nlp = ca.nlpsol("light_placement", "ipopt", nlp, options)
         self._ik = ik_settings(problem.solver)
-        # g = [h (3), plane, side, u_z]; "free" switches the two azimuth rows off through their bounds.
+        # g = [h (3), plane, side, u_z, c, v]; "free" switches the two azimuth rows off through their
+        # bounds; the environment rows are ≥ 0.
         # A zenith bound at the pole (θ_min = 0, θ_max = π) is implied by h = 0 and dropped: u_z ≤ 1 is
         # active there with a gradient that vanishes on the sphere, which stalls IPOPT (no LICQ).
         lo = math.cos(sphere.zenith_max) if sphere.zenith_max < math.pi else -np.inf
         hi = math.cos(sphere.zenith_min) if sphere.zenith_min > 0.0 else np.inf
+        env_lo, env_hi = np.zeros(n_env), np.full(n_env, np.inf)
         self._bounds = {
-            "fixed": (np.array([0.0, 0.0, 0.0, 0.0, 0.0, lo]), np.array([0.0, 0.0, 0.0, 0.0, np.inf, hi])),
+            "fixed": (
+                np.r_[0.0, 0.0, 0.0, 0.0, 0.0, lo, env_lo],
+                np.r_[0.0, 0.0, 0.0, 0.0, np.inf, hi, env_hi],
+            ),
             "free": (
-                np.array([0.0, 0.0, 0.0, -np.inf, -np.inf, lo]),
-                np.array([0.0, 0.0, 0.0, np.inf, np.inf, hi]),
+                np.r_[0.0, 0.0, 0.0, -np.inf, -np.inf, lo, env_lo],
+                np.r_[0.0, 0.0, 0.0, np.inf, np.inf, hi, env_hi],
             ),
         }
 
@@ -236,12 +283,21 @@ class LightPlacement:
 
     def _result(self, theta: Array, converged: bool, status: str) -> PlacementResult:
         """The placement at ``theta``, checked and scored independently of the NLP (``iterations`` and
-        ``time_s`` are the caller's to fill)."""
+        ``time_s`` are the caller's to fill). IPOPT relaxes the joint bounds (by ~1e-8 relative, its
+        ``bound_relax_factor``; 1e-10 rad seen with active clearance rows): θ is projected into the
+        limits first, and everything is checked there."""
+        theta = np.clip(theta, self.robot.lower, self.robot.upper)
         position, rotation = self.robot.light_pose(theta)
         h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
         zenith, azimuth = self.sphere.angles(position)
         conditioning = self.conditioning(theta)
-        feasible = h <= H_TOL and self.robot.within_limits(theta, tol=0.0)
+        clearance, row = (
+            self.environment.worst_sphere_row(self.robot, theta)
+            if self.environment is not None
+            else (math.inf, "")
+        )
+        clear = clearance >= -CLEARANCE_TOL
+        feasible = h <= H_TOL and clear
         # IPOPT rarely certifies a point of the reach boundary (no constraint qualification there, so no
         # multipliers): a feasible singular iterate is on it whether IPOPT converged or stopped
         on_boundary = feasible and conditioning < SINGULAR_TOL
@@ -249,8 +305,10 @@ class LightPlacement:
             message = f"on the reach boundary (σ_min/σ_max = {conditioning:.1e}, IPOPT: {status})"
         elif not converged:
             message = f"IPOPT: {status}, |h| = {h:.1e} m"
+        elif not clear:
+            message = f"IPOPT: {status}, but {row} is {-clearance * 1e3:.1f} mm too close"
         elif not feasible:
-            message = f"IPOPT: {status}, but |h| = {h:.1e} m or θ outside the joint limits"
+            message = f"IPOPT: {status}, but |h| = {h:.1e} m"
         else:
             message = f"IPOPT: {status}"
         return PlacementResult(
@@ -266,6 +324,8 @@ class LightPlacement:
             iterations=0,
             max_h_residual=h,
             conditioning=conditioning,
+            min_clearance_m=clearance,
+            clearance_row=row,
             time_s=0.0,
         )
 
@@ -287,7 +347,7 @@ class LightPlacement:
             )
             if not ik.success:
                 continue
-            lbg[-1] = ubg[-1] = math.cos(zenith)
+            lbg[ZENITH_ROW] = ubg[ZENITH_ROW] = math.cos(zenith)
             args = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
             run = _run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
             iterations += run.iterations
