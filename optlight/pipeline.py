@@ -5,9 +5,11 @@ Stages (each timed in ``Plan.timings``):
 1. ``scene``: camera, object, G-buffer;
 2. ``landmarks``: where the light should go (:func:`optlight.planning.landmarks.find_landmarks`);
 3. ``placement``: joint angles at every landmark by generalized IK (5-D task, roll free), chained
-   from one landmark to the next; where IK cannot reach a landmark, the joint-space placement NLP
-   moves it to the best reachable light on its azimuth (with a warning); a landmark neither reaches
-   is an error that names it, or is dropped with a warning when ``[landmarks] allow_partial`` is set;
+   from one landmark to the next; where IK cannot reach a landmark, or (``[environment] enabled``)
+   its IK solution breaks the clearance or blocks the camera's view, the joint-space placement NLP
+   moves it to the best light on its azimuth the robot reaches clear of the environment (with a
+   warning); a landmark neither reaches is an error that names it, or is dropped with a warning when
+   ``[landmarks] allow_partial`` is set;
 4. ``path``: visiting order (azimuth, or a short open tour in joint space), great-circle knots, and
    per-knot IK along the path (the paper's pipeline, and the NLP's warm start);
 5. ``nlp``: the trajectory NLP over all knots (:class:`TrajectoryOptimizer`), with clearance and
@@ -178,15 +180,25 @@ def place_landmarks(
     landmarks: Sequence[Landmark],
     *,
     scene: Scene | None = None,
+    environment: Environment | None = None,
 ) -> tuple[list[Landmark], Array, list[str]]:
     """Joint angles at each landmark: IK chained in the given order, retried from θ_ref.
 
     Where both IK attempts fail, the joint-space placement NLP (:class:`LightPlacement`) runs on the
-    landmark's azimuth, warm-started from the attempt with the smaller residual: when it succeeds the
-    landmark is replaced by the best light the robot reaches on that azimuth, kept off the singular
-    reach boundary (status "placed", its cost; a warning says how far it moved and why). The NLP is
-    built on the first such landmark and reused; ``scene`` (the problem's, camera resolution) is
-    built from ``problem`` then when not given.
+    landmark's azimuth, warm-started from the attempt with the smaller residual (then from the other
+    when that fails): when it succeeds the landmark is replaced by the best light the robot reaches
+    on that azimuth, kept off the singular reach boundary (status "placed", its cost; a warning says
+    how far it moved and why). The NLP is built on the first such landmark and reused; ``scene`` (the
+    problem's, camera resolution) is built from ``problem`` then when not given.
+
+    With ``[environment] enabled`` (``environment``: the problem's, built from it when not given) the
+    IK solution must also clear it: every row of :meth:`Environment.sphere_clearance` (the NLPs'
+    sphere model: clearance, and the view cone, a landmark being a capture) ≥ 0. The IK does not see
+    the environment, so a solution that breaks a row is retried from θ_ref and then goes to the
+    placement NLP (warm-started from the attempt with the larger clearance), which has those rows as
+    constraints: it finds joint angles clear of the environment for the same light when there are
+    any (the landmark's cost is the optimum on its azimuth), or moves the landmark along its azimuth
+    to the best light that has them.
 
     Returns the landmarks kept, their joint angles (M, n) and warnings. Raises
     :class:`UnreachableError` naming the first landmark neither IK nor the placement reaches (with
@@ -194,21 +206,42 @@ def place_landmarks(
     """
     kept, thetas, notes = [], [], []
     placement: LightPlacement | None = None
+    if not problem.environment.enabled:
+        environment = None
+    elif environment is None:
+        environment = Environment.from_problem(problem)
     previous = robot.theta_ref
     for lm in landmarks:
-        result = _ik(robot, sphere, lm.position, previous, problem)
-        if not result.success:
-            retry = _ik(robot, sphere, lm.position, robot.theta_ref, problem)
-            result = retry if retry.success or retry.residual < result.residual else result
-        if result.success:
+        attempts: list[tuple[IKResult, float, str]] = []
+        for start in (previous, robot.theta_ref):
+            result = _ik(robot, sphere, lm.position, start, problem)
+            clearance, row = (
+                environment.worst_sphere_row(robot, result.theta) if environment is not None else (np.inf, "")
+            )
+            attempts.append((result, clearance, row))
+            if result.success and clearance >= 0.0:
+                break
+        if result.success and clearance >= 0.0:
             kept.append(lm)
             thetas.append(result.theta)
             previous = result.theta
             continue
+        # the placement starts from the better attempt (reached before not; then the larger
+        # clearance, or the smaller residual), then from the other
+        attempts.sort(key=lambda a: (not a[0].success, -a[1] if a[0].success else a[0].residual))
+        result, clearance, row = attempts[0]
+        why = (
+            f"out of reach of {robot.name}: {result.message}"
+            if not result.success
+            else f"blocked for {robot.name}: its IK solution brings {row} {-clearance * 1e3:.1f} mm too close"
+        )
         if placement is None:
             scene = scene if scene is not None else Scene.from_problem(problem)
-            placement = LightPlacement(problem, scene, robot)
+            placement = LightPlacement(problem, scene, robot, environment=environment)
         placed = placement.solve(lm.azimuth, result.theta)
+        if not placed.success and attempts[1:]:
+            other = placement.solve(lm.azimuth, attempts[1][0].theta)
+            placed = other if other.success else placed
         if placed.success:
             kept.append(
                 replace(
@@ -224,17 +257,28 @@ def place_landmarks(
             )
             thetas.append(placed.theta)
             previous = placed.theta
+            goal = (
+                f"to be reachable by {robot.name}"
+                if not result.success
+                else f"to clear the environment ({row} was {-clearance * 1e3:.1f} mm too close)"
+            )
+            before, after = f"{np.rad2deg(lm.zenith):.1f}°", f"{np.rad2deg(placed.zenith):.1f}°"
+            moved = (
+                f"moved from zenith {before} to {after}"
+                if before != after
+                else f"kept at zenith {before} with the placement's joint angles"
+            )
             notes.append(
-                f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) moved from zenith "
-                f"{np.rad2deg(lm.zenith):.1f}° to {np.rad2deg(placed.zenith):.1f}° to be reachable by "
-                f"{robot.name} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
+                f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {moved} {goal} "
+                f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
             )
             continue
+        clear = " clear of the environment" if environment is not None else ""
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
-            f"{np.rad2deg(lm.azimuth):.1f}°) is out of reach of {robot.name}: {result.message}; nor is any "
-            f"light on its azimuth within zenith {np.rad2deg(sphere.zenith_min):.1f}–"
-            f"{np.rad2deg(sphere.zenith_max):.1f}° (placement NLP: {placed.message})"
+            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear} within "
+            f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
+            f"(placement NLP: {placed.message})"
         )
         if not problem.landmarks.allow_partial:
             raise UnreachableError(
@@ -352,7 +396,9 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     timings["landmarks"] = time.perf_counter() - start
 
     done = stage("placement")
-    kept, thetas, notes = place_landmarks(problem, robot, sphere, landmarks.landmarks, scene=scene)
+    kept, thetas, notes = place_landmarks(
+        problem, robot, sphere, landmarks.landmarks, scene=scene, environment=environment
+    )
     done()
 
     done = stage("path")
