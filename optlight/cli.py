@@ -105,6 +105,8 @@ def _cmd_reach(args: argparse.Namespace) -> int:
     result = reachability_map(problem, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     png, js = result.save(args.out)
     print(f"{100 * result.reachable_fraction:.1f}% of the light cap reachable by {problem.robot.name}")
+    if result.environment:
+        print(f"{100 * result.taken_fraction:.1f}% of it taken by the environment (collision or view)")
     print(f"wrote {png} and {js}")
     return 0
 

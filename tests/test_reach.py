@@ -6,9 +6,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from optlight.environment import Environment
 from optlight.geometry import LightSphere
 from optlight.robot import load_robot, reachability_map
+from optlight.robot.reach import CLEARANCE_TOL, POSE_TOL
 from optlight.spec import load_problem, problem_from_dict
 
 
@@ -57,3 +60,40 @@ def test_unreachable_cells_are_reported(tmp_path: Path) -> None:
     data = json.loads(js.read_text())
     i, j = np.argwhere(failed)[0]
     assert data["theta_rad"][i][j] is None and data["manipulability"][i][j] is None
+
+
+def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
+    """table_wall: the arm reaches the far side of the cap only over the camera's view cone. Every
+    cell stays reachable by the IK; the taken ones have no clear joint angles, the others have them."""
+    problem = load_problem("table_wall")
+    robot = load_robot(problem)
+    env = Environment.from_problem(problem)
+    sphere = LightSphere.from_problem(problem)
+    reach = reachability_map(
+        problem, zenith_step_deg=6.0, azimuth_step_deg=30.0, robot=robot, environment=env
+    )
+    assert reach.environment and reach.success.all()
+    assert reach.taken.any() and reach.clear.any()
+    assert 0.0 < reach.taken_fraction < 0.5 and reach.clear_fraction == 1.0 - reach.taken_fraction
+    assert 150.0 in {azimuth for _, azimuth in reach.taken_cells}
+    assert set(reach.status[reach.taken]) == {"taken"} and set(reach.status[reach.clear]) == {"reachable"}
+    for i, j in np.argwhere(reach.success):
+        row, _ = env.worst_sphere_row(robot, reach.theta[i, j])
+        assert row == pytest.approx(reach.clearance[i, j], abs=1e-12)
+        # clear cells keep clear joint angles (the IK's, or found near them by ClearLight)
+        assert (row < -CLEARANCE_TOL) == reach.taken[i, j]
+        light = robot.light_pose(reach.theta[i, j])[0]
+        target = sphere.position(reach.zenith[i], reach.azimuth[j])
+        assert np.linalg.norm(light - target) <= max(reach.residual[i, j], POSE_TOL) + 1e-12
+
+    free = problem_from_dict({**problem.to_dict(), "environment": {"enabled": False}}, source=problem.source)
+    without = reachability_map(free, zenith_step_deg=6.0, azimuth_step_deg=30.0, robot=robot)
+    assert not without.environment and not without.taken.any() and np.isnan(without.clearance).all()
+    np.testing.assert_array_equal(without.success, reach.success)  # the IK part does not change
+
+    png, js = reach.save(tmp_path)
+    assert png.stat().st_size > 10_000
+    data = json.loads(js.read_text())
+    assert data["environment"] is True and data["taken_fraction"] == reach.taken_fraction
+    i, j = np.argwhere(reach.taken)[0]
+    assert data["status"][i][j] == "taken" and data["success"][i][j] is True and data["clearance_m"][i][j] < 0

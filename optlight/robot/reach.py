@@ -4,7 +4,18 @@ Over a zenith × azimuth grid of the allowed cap (zenith_min … zenith_max, all
 generalized IK (position + optical axis through O) is solved for the problem's robot and base
 placement, warm-started from the neighbouring cell (previous azimuth of the same zenith ring, else
 the same azimuth one ring in), and the manipulability w = sqrt(det(J Jᵀ)) of the light Jacobian is
-recorded where it succeeds. Collisions are not checked here.
+recorded where it succeeds.
+
+The environment. With ``[environment] enabled`` a reached cell is also checked against the NLPs'
+model of the environment (:meth:`optlight.environment.Environment.sphere_clearance`: robot spheres to
+the obstacles and to each other, minus the margins, and to the camera's view cone, the light being a
+capture): every row must be ≥ 0. The IK does not see the environment, and a redundant arm has other
+joint angles for the same light, so where the IK's configuration breaks a row a small NLP looks for
+clear ones near it (:class:`ClearLight`: min |θ − θ_IK|² with the light pinned at the cell, h(θ) = 0,
+c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK start). A cell where neither
+finds any is *taken by the environment*: the robot reaches the light there only by colliding or
+blocking the camera (as far as these local solves can tell). The map then has three kinds of cells:
+reachable (clear), taken by the environment, unreachable.
 
 The polar plot is the cap as seen from the camera: azimuth 0 along x_S (image right), 90° along y_S
 (image up), radius = zenith.
@@ -16,27 +27,43 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+import casadi as ca
 import numpy as np
 from matplotlib.figure import Figure
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from optlight.geometry import LightSphere
+from optlight.geometry import LightSphere, h_residual
 from optlight.robot.ik import generalized_ik, ik_settings
 from optlight.robot.loading import Robot, load_robot
 from optlight.robot.tasks import KinematicState, manipulability
 from optlight.spec import Problem
 
+if TYPE_CHECKING:
+    from optlight.environment import Environment
+
 Array = NDArray[np.float64]
+
+#: Smallest environment row (m) of a clear configuration, checked with pinocchio (IPOPT stops ~1e-9
+#: outside its feasible set).
+CLEARANCE_TOL = 1e-8
+#: Largest |h|∞ (m) and light position error (m) of a clear configuration found by :class:`ClearLight`.
+POSE_TOL = 1e-8
 
 
 @dataclass(frozen=True)
 class ReachabilityMap:
     """IK over the light cap. Arrays are indexed [zenith, azimuth]; angles in rad.
 
-    ``success`` (Z, A) bool; ``manipulability`` (Z, A), NaN where the IK failed; ``theta`` (Z, A, n)
-    joint angles (NaN where it failed); ``residual`` (Z, A) final |e| in m; ``time_s`` total IK time.
+    ``success`` (Z, A) bool: the IK reached the cell; ``manipulability`` (Z, A), NaN where the IK
+    failed; ``theta`` (Z, A, n) joint angles (NaN where it failed): the clear ones when the IK's were
+    not; ``residual`` (Z, A) final |e| in m; ``time_s`` total time (IK and clearance).
+
+    ``environment``: whether the environment was checked. ``taken`` (Z, A) bool: reached, but taken
+    by the environment (no clear joint angles found); ``clearance`` (Z, A) the smallest environment
+    row at ``theta`` (m; negative where taken, NaN where the IK failed). Without the environment
+    ``taken`` is all False and ``clearance`` all NaN.
     """
 
     robot: str
@@ -47,11 +74,38 @@ class ReachabilityMap:
     theta: Array
     residual: Array
     time_s: float
+    environment: bool
+    taken: NDArray[np.bool_]
+    clearance: Array
+
+    @property
+    def clear(self) -> NDArray[np.bool_]:
+        """(Z, A) cells reached and clear of the environment (all reached cells without one)."""
+        return self.success & ~self.taken
 
     @property
     def reachable_fraction(self) -> float:
-        """Fraction of the grid cells the IK reached."""
+        """Fraction of the grid cells the IK reached (whether or not the environment takes them)."""
         return float(self.success.mean())
+
+    @property
+    def clear_fraction(self) -> float:
+        """Fraction of the grid cells reached clear of the environment."""
+        return float(self.clear.mean())
+
+    @property
+    def taken_fraction(self) -> float:
+        """Fraction of the grid cells taken by the environment (reached, but never clear of it)."""
+        return float(self.taken.mean())
+
+    @property
+    def taken_cells(self) -> list[tuple[float, float]]:
+        """(zenith, azimuth) in degrees of every cell taken by the environment."""
+        zi, ai = np.nonzero(self.taken)
+        return [
+            (float(np.rad2deg(self.zenith[i])), float(np.rad2deg(self.azimuth[j])))
+            for i, j in zip(zi, ai, strict=True)
+        ]
 
     @property
     def unreachable(self) -> list[tuple[float, float]]:
@@ -62,8 +116,17 @@ class ReachabilityMap:
             for i, j in zip(zi, ai, strict=True)
         ]
 
+    @property
+    def status(self) -> NDArray[np.str_]:
+        """(Z, A) "reachable" (and clear), "taken" (by the environment) or "unreachable" per cell."""
+        out = np.full(self.success.shape, "unreachable", dtype="<U11")
+        out[self.success] = "reachable"
+        out[self.taken] = "taken"
+        return out
+
     def to_dict(self) -> dict[str, Any]:
-        """Plain data for ``reachability.json`` (degrees; null where the IK failed)."""
+        """Plain data for ``reachability.json`` (degrees; null where the IK failed). ``status`` per
+        cell: "reachable", "taken" (by the environment) or "unreachable"; ``success`` is the IK's."""
 
         def nulls(a: Array) -> list[Any]:
             return [[None if not np.isfinite(x).all() else np.round(x, 6).tolist() for x in row] for row in a]
@@ -72,8 +135,13 @@ class ReachabilityMap:
             "robot": self.robot,
             "zenith_deg": np.rad2deg(self.zenith).round(6).tolist(),
             "azimuth_deg": np.rad2deg(self.azimuth).round(6).tolist(),
+            "environment": self.environment,
             "reachable_fraction": self.reachable_fraction,
+            "clear_fraction": self.clear_fraction,
+            "taken_fraction": self.taken_fraction,
             "success": self.success.tolist(),
+            "status": self.status.tolist(),
+            "clearance_m": nulls(self.clearance),
             "manipulability": nulls(self.manipulability),
             "residual_m": self.residual.tolist(),
             "theta_rad": nulls(self.theta),
@@ -81,7 +149,8 @@ class ReachabilityMap:
         }
 
     def figure(self) -> Figure:
-        """Polar plot: manipulability per cell (colour), unreachable cells as red crosses."""
+        """Polar plot: manipulability per clear cell (colour), cells taken by the environment in
+        grey with orange dots, unreachable cells as red crosses."""
         fig = Figure(figsize=(6.0, 5.2), layout="constrained")
         ax = fig.add_subplot(projection="polar")
         z_deg = np.rad2deg(self.zenith)
@@ -90,19 +159,38 @@ class ReachabilityMap:
         r_edges = np.clip(np.append(z_deg - dz / 2, z_deg[-1] + dz / 2), 0.0, None)
         a_edges = np.append(self.azimuth - da / 2, self.azimuth[-1] + da / 2)
         mesh = ax.pcolormesh(
-            a_edges, r_edges, np.ma.masked_invalid(self.manipulability), cmap="viridis", shading="flat"
+            a_edges,
+            r_edges,
+            np.ma.masked_where(~self.clear, self.manipulability),
+            cmap="viridis",
+            shading="flat",
         )
         fig.colorbar(mesh, ax=ax, label="manipulability  sqrt(det J Jᵀ)", shrink=0.8)
+        taken = self.taken
+        if taken.any():
+            ax.pcolormesh(
+                a_edges,
+                r_edges,
+                np.ma.masked_where(~taken, np.ones(taken.shape)),
+                cmap="Greys",
+                vmin=0.0,
+                vmax=2.0,
+                shading="flat",
+            )
+            zi, ai = np.nonzero(taken)
+            ax.plot(
+                self.azimuth[ai], z_deg[zi], "o", color="tab:orange", ms=4, label="taken by the environment"
+            )
         zi, ai = np.nonzero(~self.success)
         if len(zi):
             ax.plot(self.azimuth[ai], z_deg[zi], "x", color="red", ms=6, label="unreachable")
+        if taken.any() or len(zi):
             ax.legend(loc="lower left", bbox_to_anchor=(-0.15, -0.12))
         ax.set_ylim(0.0, r_edges[-1])  # radial limits
-        ax.set_title(
-            f"{self.robot}: light cap reachable in {100 * self.reachable_fraction:.1f} % of cells\n"
-            "(seen from the camera; radius = zenith in degrees)",
-            fontsize=10,
-        )
+        title = f"{self.robot}: light cap reachable in {100 * self.reachable_fraction:.1f} % of cells"
+        if self.environment:
+            title += f",\nclear of the environment in {100 * self.clear_fraction:.1f} %"
+        ax.set_title(f"{title}\n(seen from the camera; radius = zenith in degrees)", fontsize=10)
         return fig
 
     def save(self, folder: str | Path) -> tuple[Path, Path]:
@@ -115,20 +203,109 @@ class ReachabilityMap:
         return png, js
 
 
+class ClearLight:
+    """Joint angles clear of the environment for a given light, near a given configuration.
+
+    Variables θ (n, rad); parameters θ₀ (n), the light position a* (m, on the sphere) and two unit
+    vectors t₁, t₂ tangent to the sphere at a*:
+
+        min |θ − θ₀|²   s.t.  h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0,  t_iᵀ (a(θ) − a*) = 0 (i = 1, 2),
+                              c(θ) ≥ 0,  v(θ) ≥ 0,  lower ≤ θ ≤ upper
+
+    (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
+    the view cone is on). Built once; :meth:`solve` checks its answer with pinocchio.
+    """
+
+    def __init__(self, robot: Robot, sphere: LightSphere, environment: Environment, problem: Problem) -> None:
+        self.robot, self.sphere, self.environment = robot, sphere, environment
+        n = robot.n
+        theta = ca.MX.sym("theta", n)
+        p = ca.MX.sym("p", n + 9)
+        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
+        a, rot = robot.symbolic_light_pose(theta)
+        center = ca.DM(sphere.center)
+        rows = [
+            rot.T @ (center - a) - ca.DM([0.0, 0.0, sphere.radius]),
+            ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target)),
+            environment.clearance_function(robot)(theta),
+        ]
+        if environment.view_cone is not None:
+            rows.append(environment.view_cone_function(robot)(theta))
+        g = ca.vertcat(*rows)
+        self._lbg = np.zeros(g.size1())  # 5 equalities, then the environment's rows ≥ 0
+        self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
+        options: dict[str, Any] = {
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "print_time": False,
+            "ipopt.max_iter": problem.solver.max_iter,
+            "ipopt.tol": problem.solver.tol,
+        }
+        nlp = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
+        self.nlp = ca.nlpsol("clear_light", "ipopt", nlp, options)
+
+    def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float] | None:
+        """Clear joint angles for the light at ``target`` (m, on the sphere) nearest ``theta0`` (rad)
+        that IPOPT finds from ``theta0``, with their smallest environment row (m); None when it finds
+        none (checked with pinocchio at θ projected into the limits: |h|∞ and the light's distance to
+        ``target`` ≤ :data:`POSE_TOL`, every row ≥ −:data:`CLEARANCE_TOL`)."""
+        target = np.asarray(target, float)
+        t1, t2 = _tangent_basis((target - self.sphere.center) / self.sphere.radius)
+        theta0 = np.asarray(theta0, float)
+        out = self.nlp(
+            x0=theta0,
+            p=np.r_[theta0, target, t1, t2],
+            lbx=self.robot.lower,
+            ubx=self.robot.upper,
+            lbg=self._lbg,
+            ubg=self._ubg,
+        )
+        if not self.nlp.stats()["success"]:
+            return None
+        # IPOPT relaxes the bounds by ~1e-8 relative: projected into the limits, checked there
+        theta = np.clip(np.asarray(out["x"], float).ravel(), self.robot.lower, self.robot.upper)
+        position, rotation = self.robot.light_pose(theta)
+        h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
+        clearance, _ = self.environment.worst_sphere_row(self.robot, theta)
+        ok = (
+            h <= POSE_TOL
+            and float(np.linalg.norm(position - target)) <= POSE_TOL
+            and clearance >= -CLEARANCE_TOL
+        )
+        return (theta, clearance) if ok else None
+
+
+def _tangent_basis(u: Array) -> tuple[Array, Array]:
+    """Two unit vectors orthogonal to the unit vector u and to each other."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(u, helper)
+    t1 /= np.linalg.norm(t1)
+    return t1, np.cross(u, t1)
+
+
 def reachability_map(
     problem: Problem,
     zenith_step_deg: float = 5.0,
     azimuth_step_deg: float = 10.0,
     *,
     robot: Robot | None = None,
+    environment: Environment | None = None,
 ) -> ReachabilityMap:
-    """IK success and manipulability over the problem's light cap (see the module docstring).
+    """IK success and manipulability over the problem's light cap, and with ``[environment]
+    enabled`` the cells the environment takes away (see the module docstring).
 
     Zenith from ``light_sphere.zenith_min_deg`` to ``zenith_max_deg`` (both included) in steps of at
     most ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``.
-    ``robot`` defaults to ``load_robot(problem)``; IK settings from ``problem.solver``.
+    ``robot`` defaults to ``load_robot(problem)``, ``environment`` to the problem's (used only when
+    it is enabled); IK settings from ``problem.solver``.
     """
+    from optlight.environment import Environment  # optlight.environment imports optlight.robot
+
     robot = robot if robot is not None else load_robot(problem)
+    if not problem.environment.enabled:
+        environment = None
+    elif environment is None:
+        environment = Environment.from_problem(problem)
     sphere = LightSphere.from_problem(problem)
     zmin, zmax = problem.light_sphere.zenith_min_deg, problem.light_sphere.zenith_max_deg
     n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
@@ -141,6 +318,9 @@ def reachability_map(
     manip = np.full((n_z, n_a), np.nan)
     theta = np.full((n_z, n_a, robot.n), np.nan)
     residual = np.full((n_z, n_a), np.nan)
+    taken = np.zeros((n_z, n_a), bool)
+    clearance = np.full((n_z, n_a), np.nan)
+    clear_light: ClearLight | None = None
     t0 = time.perf_counter()
     for i, zen in enumerate(zenith):
         for j, azi in enumerate(azimuth):
@@ -152,10 +332,31 @@ def reachability_map(
                 start = robot.theta_ref
             res = generalized_ik(robot, sphere, (zen, azi), start, **settings)
             residual[i, j] = res.residual
-            if res.success:
-                success[i, j] = True
-                theta[i, j] = res.theta
-                manip[i, j] = manipulability(KinematicState.compute(robot, res.theta).jacobian)
+            if not res.success:
+                continue
+            success[i, j] = True
+            theta[i, j] = res.theta
+            if environment is not None:
+                clearance[i, j] = environment.worst_sphere_row(robot, res.theta)[0]
+                if clearance[i, j] < 0.0:
+                    if clear_light is None:
+                        clear_light = ClearLight(robot, sphere, environment, problem)
+                    target = sphere.position(zen, azi)
+                    found = clear_light.solve(target, res.theta) or clear_light.solve(target, start)
+                    taken[i, j] = found is None
+                    if found is not None:
+                        theta[i, j], clearance[i, j] = found
+            manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
     return ReachabilityMap(
-        robot.name, zenith, azimuth, success, manip, theta, residual, time.perf_counter() - t0
+        robot.name,
+        zenith,
+        azimuth,
+        success,
+        manip,
+        theta,
+        residual,
+        time.perf_counter() - t0,
+        environment=environment is not None,
+        taken=taken,
+        clearance=clearance,
     )
