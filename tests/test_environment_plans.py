@@ -1,0 +1,194 @@
+"""Plans in an environment (issue 7), end to end on the obstacle problems at reduced sizes: the
+constrained plan clears every margin by the exact (coal) checks of the verification; the
+unconstrained plan of the same problem, checked afterwards, is caught and cannot be saved; a
+trajectory through the table and a light in the camera's view cone are caught by the verification."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import optlight
+from optlight.environment import LIGHT, VIEW_CONE, Environment
+from optlight.errors import VerificationError
+from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.robot import Robot, generalized_ik
+from optlight.spec import Problem, load_problem, problem_from_dict
+from optlight.verify import ENVIRONMENT_CHECKS, CheckResult, VerificationReport, verify_trajectory
+
+#: Landmarks of the reduced collision problem (its file has 12).
+COLLISION_LANDMARKS = 8
+
+
+def reduced(name: str, landmarks: int | None = None, **sections: dict) -> Problem:
+    """A built-in problem with a 96² camera (and ``landmarks`` landmarks), sections updated."""
+    original = load_problem(name)
+    data = original.to_dict()
+    data["camera"].update(width=96, height=96)
+    if landmarks is not None:
+        data["landmarks"].update(count=landmarks)
+    for section, values in sections.items():
+        data[section].update(values)
+    return problem_from_dict(data, source=original.source)
+
+
+def solve_quietly(problem: Problem) -> optlight.Plan:
+    """``optlight.solve`` without the placement's warnings (they are in ``plan.warnings``)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return optlight.solve(problem)
+
+
+def verify_in(
+    plan_robot: Robot, trajectory: Trajectory, problem: Problem, landmarks: np.ndarray
+) -> VerificationReport:
+    """The pipeline's verification of ``trajectory`` with the exact checks of ``problem``'s environment
+    (whether or not the problem enables it for planning)."""
+    env = Environment.from_problem(problem)
+    sphere = optlight.LightSphere.from_problem(problem)
+    return verify_trajectory(
+        trajectory,
+        light_pose=plan_robot.light_pose,
+        lower=plan_robot.lower,
+        upper=plan_robot.upper,
+        velocity_limit=plan_robot.velocity_limit * problem.robot.velocity_scale,
+        acceleration_limit=plan_robot.acceleration_limit,
+        sphere=sphere,
+        landmark_positions=landmarks,
+        environment=lambda q, t, captures: env.check(plan_robot, q, t, capture_times=captures),
+    )
+
+
+def environment_checks(report: VerificationReport) -> dict[str, CheckResult]:
+    """The clearance, self-collision and view-cone checks of a report."""
+    return {name: c for name, c in report.checks.items() if name in ENVIRONMENT_CHECKS.values()}
+
+
+@pytest.fixture(scope="module")
+def collision() -> Problem:
+    return reduced("collision", COLLISION_LANDMARKS)
+
+
+@pytest.fixture(scope="module")
+def constrained(collision: Problem) -> optlight.Plan:
+    return solve_quietly(collision)
+
+
+@pytest.fixture(scope="module")
+def unconstrained(collision: Problem) -> optlight.Plan:
+    return solve_quietly(reduced("collision", COLLISION_LANDMARKS, environment={"enabled": False}))
+
+
+def test_the_constrained_plan_clears_every_margin(constrained: optlight.Plan) -> None:
+    report = constrained.verification
+    assert constrained.nlp.success and report.passed, report.summary()
+    checks = environment_checks(report)
+    assert set(checks) == {"clearance", "self_collision"}  # collision.toml: no view cone
+    for name, check in checks.items():
+        # allowed distance minus the smallest coal distance over the dense samples: ≤ 0 means every
+        # pair of bodies stays at least its margin apart
+        assert check.passed and check.max_value <= 0.0, name
+        assert check.samples == report.samples and "↔" in (check.joint or "")
+    assert all(v >= 0.0 for v in constrained.summary()["min_clearance_m"].values())
+    env = Environment.from_problem(constrained.problem)
+    t = constrained.trajectory.sample_times(200.0)
+    exact = env.check(constrained.robot, constrained.trajectory.sample(t)[0], t)
+    assert exact.passed and exact.min_clearance_m >= env.margin
+
+
+def test_the_unconstrained_plan_collides_and_is_refused(
+    unconstrained: optlight.Plan, collision: Problem, tmp_path: Path
+) -> None:
+    # planned without the environment, its own verification has nothing to object to …
+    assert unconstrained.verification.passed and not environment_checks(unconstrained.verification)
+    # … checked in the environment afterwards, it hits the object's bounding sphere and itself
+    landmarks = np.array([lm.position for lm in unconstrained.visited])
+    report = verify_in(unconstrained.robot, unconstrained.trajectory, collision, landmarks)
+    assert not report.passed
+    assert {name for name, n in report.counts.items() if n} <= {"clearance", "self_collision"}
+    found = [v for v in report.violations if v.check in ("clearance", "self_collision")]
+    assert found
+    for v in found:
+        first, second = (v.joint or "").split(" ↔ ")
+        assert first and second  # the two bodies
+        assert 0.0 <= v.time_s <= unconstrained.trajectory.duration and f"t = {v.time_s:.4f} s" in v.message
+        assert v.value < v.limit  # distance (m) below the allowed one
+    assert any(v.check == "clearance" and v.joint.endswith("↔ object") for v in found if v.joint)
+
+    bad = dataclasses.replace(unconstrained, verification=report)
+    with pytest.raises(VerificationError, match="failed verification"):
+        bad.save(tmp_path / "out", preview=False)
+    assert not any(tmp_path.iterdir()), "nothing may be written for a plan that fails verification"
+
+
+def test_a_trajectory_through_the_table_is_caught(constrained: optlight.Plan, collision: Problem) -> None:
+    """From the first landmark to the reference posture with the shoulder forward and the elbow open,
+    the hand under the table top, and back: a hand-made plan, timed as the pipeline times its plans."""
+    robot = constrained.robot
+    start = constrained.landmark_thetas[0]
+    dip = robot.theta_ref.copy()
+    dip[1], dip[3] = 1.7, -0.2
+    assert robot.within_limits(dip) and robot.frame_pose("flange", dip).translation[2] < -0.03
+    s = np.linspace(0.0, 1.0, 21)[:, None]
+    down = (1 - s) * start + s * dip
+    trajectory = time_parameterize(
+        [np.concatenate([down, down[-2::-1]])],
+        robot.velocity_limit,
+        robot.acceleration_limit,
+        dwell_s=0.5,
+        joint_names=robot.joint_names,
+    )
+    light = robot.light_pose(start)[0]
+    report = verify_in(robot, trajectory, collision, np.array([light, light]))
+
+    assert not report.passed and report.counts["clearance"] > 0
+    assert all(n == 0 for name, n in report.counts.items() if name not in ENVIRONMENT_CHECKS.values())
+    table = [v for v in report.violations if v.check == "clearance" and (v.joint or "").endswith("↔ table")]
+    assert table and min(v.value for v in table) < -0.02  # penetration depth (m)
+    # the deepest sample is the turning point, halfway through the motion
+    (_, leave), (arrive, _) = trajectory.landmark_intervals
+    worst = min(table, key=lambda v: v.value)
+    assert worst.time_s == pytest.approx(0.5 * (leave + arrive), abs=0.02 * (arrive - leave))
+
+
+def test_a_light_in_the_view_cone_is_caught() -> None:
+    """table_wall: a capture with the light at zenith 0, between the camera and the face."""
+    problem = reduced("table_wall")
+    robot = optlight.load_robot(problem)
+    sphere = optlight.LightSphere.from_problem(problem)
+    ik = generalized_ik(robot, sphere, (0.0, 0.0))
+    assert ik.success
+    trajectory = time_parameterize(
+        [np.repeat(ik.theta[None], 2, axis=0)],  # one landmark: its dwell
+        robot.velocity_limit,
+        robot.acceleration_limit,
+        dwell_s=0.5,
+        joint_names=robot.joint_names,
+    )
+    light = robot.light_pose(ik.theta)[0]
+    report = verify_in(robot, trajectory, problem, np.array([light] * len(trajectory.landmark_intervals)))
+    view = report.checks["view_cone"]
+    assert not view.passed and view.max_value > 0.0  # this deep inside the cone (m)
+    light = [v for v in report.violations if v.check == "view_cone" and v.joint == f"{LIGHT} ↔ {VIEW_CONE}"]
+    assert light and all(v.time_s in trajectory.capture_times for v in light)
+
+
+def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
+    """The issue's problem: table, camera stand, wall and the view cone at the captures."""
+    problem = reduced("table_wall")
+    plan = solve_quietly(problem)
+    assert plan.verification.passed, plan.verification.summary()
+    assert len(plan.visited) == problem.landmarks.count >= 8
+    checks = environment_checks(plan.verification)
+    assert set(checks) == {"clearance", "self_collision", "view_cone"}
+    assert all(c.max_value <= 0.0 for c in checks.values())
+
+    free = solve_quietly(reduced("table_wall", environment={"enabled": False}))
+    landmarks = np.array([lm.position for lm in free.visited])
+    report = verify_in(free.robot, free.trajectory, problem, landmarks)
+    assert report.counts["clearance"] > 0 and report.counts["view_cone"] > 0
+    assert any(v.check == "clearance" and (v.joint or "").endswith("↔ wall") for v in report.violations)
