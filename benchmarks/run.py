@@ -82,6 +82,7 @@ VERSIONED = (
 #: Statistic key suffixes a component may use, with the unit they denote.
 UNIT_SUFFIXES = {"_ms": "ms", "_s": "s"}
 MS_PER_S = 1e3
+MM_PER_M = 1e3
 #: The IK baseline in ``bench_ik``: pinocchio's CLIK example, unchanged but for the frame.
 IK_BASELINE = "clik dt=0.1"
 COLUMNS = ("benchmark", "metric", "median", "p98", "success %", "baseline median", "ratio")
@@ -404,8 +405,51 @@ def solve_rows(name: str, result: Result) -> list[Row]:
     ]
 
 
+def environment_rows(name: str, result: Result) -> list[Row]:
+    """``bench_environment``: per problem, the constrained plan's solve, NLP and motion times against
+    the unconstrained plan's (the baseline, same run); then the smallest distance of each exact
+    environment check for both plans (mm; < 0 = penetration). Success % is the share of plans that
+    pass verification in the environment (on a check's rows: that pass that check)."""
+    rows = []
+    for problem, r in result["problems"].items():
+        label = f"{name} {problem}"
+        ours, theirs = r["constrained"], r["unconstrained"]
+        for metric, key in (("solve time [s]", "solve_time_s"), ("NLP time [s]", "nlp_time_s")):
+            rows.append(
+                Row(
+                    label,
+                    metric,
+                    ours[key]["median"],
+                    ours[key]["p98"],
+                    ours["passed_pct"],
+                    theirs[key]["median"],
+                )
+            )
+        key = "motion_time_s"
+        rows.append(
+            Row(label, "motion time [s]", ours[key]["median"], ours[key]["p98"], None, theirs[key]["median"])
+        )
+        for plan in ("constrained", "unconstrained"):
+            for check, c in r[plan]["checks"].items():
+                d = c["min_distance_m"]
+                rows.append(
+                    Row(
+                        label,
+                        f"{plan}: min {check} distance [mm]",
+                        MM_PER_M * d["median"],
+                        MM_PER_M * d["p98"],
+                        c["passed_pct"],
+                    )
+                )
+    return rows
+
+
 #: Components whose results need their own reading (a baseline to pair); the rest are read generically.
-COMPONENT_ROWS: dict[str, RowsFn] = {"ik": ik_rows, "landmarks": landmark_rows}
+COMPONENT_ROWS: dict[str, RowsFn] = {
+    "environment": environment_rows,
+    "ik": ik_rows,
+    "landmarks": landmark_rows,
+}
 
 
 # --------------------------------------------------------------------------------------------

@@ -151,6 +151,27 @@ def test_baseline_pairing(runner: ModuleType) -> None:
     assert clik.ratio is None
 
 
+def test_environment_rows(runner: ModuleType) -> None:
+    def plan(seconds: float, passed: float, distance_m: float) -> dict:
+        dist = {"median": seconds, "p98": seconds}
+        check = {"min_distance_m": {"median": distance_m, "p98": distance_m}, "passed_pct": passed}
+        times = {key: dist for key in ("solve_time_s", "nlp_time_s", "motion_time_s")}
+        return {**times, "passed_pct": passed, "checks": {"clearance": check}}
+
+    result = {
+        "problems": {"p": {"constrained": plan(4.0, 100.0, 0.02), "unconstrained": plan(2.0, 0.0, -0.01)}}
+    }
+    solve, nlp, motion, ours, theirs = runner.environment_rows("environment", result)
+    assert solve.cells() == ["environment p", "solve time [s]", "4", "4", "100", "2", "2"]
+    assert nlp.ratio == motion.ratio == 2.0 and motion.success_pct is None
+    assert (ours.metric, ours.median, ours.success_pct) == (
+        "constrained: min clearance distance [mm]",
+        20.0,
+        100.0,
+    )
+    assert (theirs.median, theirs.success_pct, theirs.ratio) == (-10.0, 0.0, None)
+
+
 def test_json_safe(runner: ModuleType) -> None:
     import numpy as np
 
