@@ -39,7 +39,7 @@ from optlight.planning.path import LightPath, azimuth_order, build_path, shortes
 from optlight.planning.placement import LightPlacement
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, TrajectoryOptimizer
-from optlight.robot import IKResult, Robot, generalized_ik, load_robot
+from optlight.robot import IKResult, Robot, generalized_ik, ik_settings, load_robot
 from optlight.scene import Scene
 from optlight.spec import Problem, load_problem
 from optlight.verify import VerificationReport, verify_trajectory
@@ -160,17 +160,8 @@ def _ik(
     *,
     restarts: bool = True,
 ) -> IKResult:
-    s = problem.solver
-    return generalized_ik(
-        robot,
-        sphere,
-        target,
-        theta0,
-        max_iter=s.ik_max_iter,
-        tol=s.ik_tol,
-        damping=s.ik_damping,
-        restarts=restarts,
-    )
+    """Generalized IK with the problem's ``[solver]`` settings (gains, damping, tolerance)."""
+    return generalized_ik(robot, sphere, target, theta0, restarts=restarts, **ik_settings(problem.solver))
 
 
 def place_landmarks(
