@@ -10,8 +10,8 @@ import pytest
 
 from optlight.environment import Environment
 from optlight.geometry import LightSphere
+from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
 from optlight.robot import load_robot, reachability_map
-from optlight.robot.reach import CLEARANCE_TOL, POSE_TOL
 from optlight.spec import load_problem, problem_from_dict
 
 
@@ -80,7 +80,7 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
     for i, j in np.argwhere(reach.success):
         row, _ = env.worst_sphere_row(robot, reach.theta[i, j])
         assert row == pytest.approx(reach.clearance[i, j], abs=1e-12)
-        # clear cells keep clear joint angles (the IK's, or found near them by ClearLight)
+        # clear cells keep clear joint angles (the IK's, or found near them by ClearPosture)
         assert (row < -CLEARANCE_TOL) == reach.taken[i, j]
         light = robot.light_pose(reach.theta[i, j])[0]
         target = sphere.position(reach.zenith[i], reach.azimuth[j])

@@ -65,9 +65,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.environment import Environment
-from optlight.geometry import h_residual
+from optlight.geometry import LightSphere, h_residual
 from optlight.objectives import Objective
 from optlight.planning.landmarks import _ipopt_options, _run, exact_cost, search_scene
+from optlight.planning.trajectory import _tangent_basis
 from optlight.robot import KinematicState, Robot, generalized_ik, ik_settings
 from optlight.scene import Scene
 from optlight.spec import Problem
@@ -93,6 +94,8 @@ CONSTRAINT_TOL = 1e-10
 #: Smallest environment row (m) of a successful placement, checked with pinocchio (IPOPT stops
 #: ~1e-10 outside its feasible set, :data:`CONSTRAINT_TOL`).
 CLEARANCE_TOL = 1e-8
+#: Largest |h|∞ (m) and light position error (m) of a posture found by :class:`ClearPosture`.
+POSE_TOL = 1e-8
 #: Index of the zenith row u_z in the NLP's constraints g = [h (3), plane, side, u_z, c, v].
 ZENITH_ROW = 5
 #: The cost-scale sample: zeniths from θ_min to θ_max at each of as many azimuths (see
@@ -360,6 +363,65 @@ class LightPlacement:
         best = min(inside, key=lambda r: r.cost)
         message = f"{boundary.message}: moved {margin:g}° inside it"
         return dataclasses.replace(best, on_boundary=True, message=message), iterations
+
+
+class ClearPosture:
+    """Joint angles clear of the environment for a given light, near given joint angles: the arm's
+    redundancy used where the generalized IK, which does not see the environment, found a posture
+    that collides or blocks the camera.
+
+    Variables θ (n, rad); parameters θ₀ (n), the light position a* (m, on the sphere) and two unit
+    vectors t₁, t₂ tangent to the sphere at a*:
+
+        min |θ − θ₀|²   s.t.  h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0,  t_iᵀ (a(θ) − a*) = 0 (i = 1, 2),
+                              c(θ) ≥ 0,  v(θ) ≥ 0,  lower ≤ θ ≤ upper
+
+    (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
+    its view cone is on). The sphere is the problem's; IPOPT's iteration limit and tolerance come
+    from ``[solver]``. Built once; :meth:`solve` checks its answer with pinocchio.
+    """
+
+    def __init__(self, problem: Problem, robot: Robot, environment: Environment) -> None:
+        self.robot, self.environment = robot, environment
+        self.sphere = sphere = LightSphere.from_problem(problem)
+        n = robot.n
+        theta = ca.MX.sym("theta", n)
+        p = ca.MX.sym("p", n + 9)
+        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
+        a, rot = robot.symbolic_light_pose(theta)
+        rows = [
+            rot.T @ (ca.DM(sphere.center) - a) - ca.DM([0.0, 0.0, sphere.radius]),
+            ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target)),
+            environment.clearance_function(robot)(theta),
+        ]
+        if environment.view_cone is not None:
+            rows.append(environment.view_cone_function(robot)(theta))
+        g = ca.vertcat(*rows)
+        self._lbg = np.zeros(g.size1())  # 5 equalities, then the environment's rows ≥ 0
+        self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
+        options = _ipopt_options(problem.solver) | {"ipopt.hessian_approximation": "exact"}
+        nlp = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
+        self.nlp = ca.nlpsol("clear_posture", "ipopt", nlp, options)
+
+    def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float, str] | None:
+        """Clear joint angles for the light at ``target`` (m, on the sphere) nearest ``theta0`` (rad)
+        that IPOPT finds from ``theta0``, their smallest environment row (m) and its label; None when
+        it finds none (checked with pinocchio at θ projected into the limits, IPOPT relaxing its
+        bounds: |h|∞ and the light's distance to ``target`` ≤ :data:`POSE_TOL`, every row ≥
+        −:data:`CLEARANCE_TOL`)."""
+        target = np.asarray(target, float)
+        t1, t2 = _tangent_basis((target - self.sphere.center) / self.sphere.radius)
+        theta0 = np.asarray(theta0, float)
+        bounds = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": self._lbg, "ubg": self._ubg}
+        run = _run(self.nlp, {"x0": theta0, "p": np.r_[theta0, target, t1, t2], **bounds})
+        if not run.success:
+            return None
+        theta = np.clip(run.x, self.robot.lower, self.robot.upper)
+        position, rotation = self.robot.light_pose(theta)
+        h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
+        clearance, row = self.environment.worst_sphere_row(self.robot, theta)
+        ok = h <= POSE_TOL and np.linalg.norm(position - target) <= POSE_TOL and clearance >= -CLEARANCE_TOL
+        return (theta, clearance, row) if ok else None
 
 
 def _objective_scale(scene: Scene, objective: Objective) -> float:

@@ -11,8 +11,9 @@ model of the environment (:meth:`optlight.environment.Environment.sphere_clearan
 the obstacles and to each other, minus the margins, and to the camera's view cone, the light being a
 capture): every row must be ≥ 0. The IK does not see the environment, and a redundant arm has other
 joint angles for the same light, so where the IK's configuration breaks a row a small NLP looks for
-clear ones near it (:class:`ClearLight`: min |θ − θ_IK|² with the light pinned at the cell, h(θ) = 0,
-c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK start). A cell where neither
+clear ones near it (:class:`optlight.planning.placement.ClearPosture`: min |θ − θ_IK|² with the light
+pinned at the cell, h(θ) = 0, c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK
+start). A cell where neither
 finds any is *taken by the environment*: the robot reaches the light there only by colliding or
 blocking the camera (as far as these local solves can tell). The map then has three kinds of cells:
 reachable (clear), taken by the environment, unreachable.
@@ -29,12 +30,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import casadi as ca
 import numpy as np
 from matplotlib.figure import Figure
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from optlight.geometry import LightSphere, h_residual
+from optlight.geometry import LightSphere
 from optlight.robot.ik import generalized_ik, ik_settings
 from optlight.robot.loading import Robot, load_robot
 from optlight.robot.tasks import KinematicState, manipulability
@@ -44,12 +44,6 @@ if TYPE_CHECKING:
     from optlight.environment import Environment
 
 Array = NDArray[np.float64]
-
-#: Smallest environment row (m) of a clear configuration, checked with pinocchio (IPOPT stops ~1e-9
-#: outside its feasible set).
-CLEARANCE_TOL = 1e-8
-#: Largest |h|∞ (m) and light position error (m) of a clear configuration found by :class:`ClearLight`.
-POSE_TOL = 1e-8
 
 
 @dataclass(frozen=True)
@@ -203,86 +197,6 @@ class ReachabilityMap:
         return png, js
 
 
-class ClearLight:
-    """Joint angles clear of the environment for a given light, near a given configuration.
-
-    Variables θ (n, rad); parameters θ₀ (n), the light position a* (m, on the sphere) and two unit
-    vectors t₁, t₂ tangent to the sphere at a*:
-
-        min |θ − θ₀|²   s.t.  h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0,  t_iᵀ (a(θ) − a*) = 0 (i = 1, 2),
-                              c(θ) ≥ 0,  v(θ) ≥ 0,  lower ≤ θ ≤ upper
-
-    (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
-    the view cone is on). Built once; :meth:`solve` checks its answer with pinocchio.
-    """
-
-    def __init__(self, robot: Robot, sphere: LightSphere, environment: Environment, problem: Problem) -> None:
-        self.robot, self.sphere, self.environment = robot, sphere, environment
-        n = robot.n
-        theta = ca.MX.sym("theta", n)
-        p = ca.MX.sym("p", n + 9)
-        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
-        a, rot = robot.symbolic_light_pose(theta)
-        center = ca.DM(sphere.center)
-        rows = [
-            rot.T @ (center - a) - ca.DM([0.0, 0.0, sphere.radius]),
-            ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target)),
-            environment.clearance_function(robot)(theta),
-        ]
-        if environment.view_cone is not None:
-            rows.append(environment.view_cone_function(robot)(theta))
-        g = ca.vertcat(*rows)
-        self._lbg = np.zeros(g.size1())  # 5 equalities, then the environment's rows ≥ 0
-        self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
-        options: dict[str, Any] = {
-            "ipopt.print_level": 0,
-            "ipopt.sb": "yes",
-            "print_time": False,
-            "ipopt.max_iter": problem.solver.max_iter,
-            "ipopt.tol": problem.solver.tol,
-        }
-        nlp = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
-        self.nlp = ca.nlpsol("clear_light", "ipopt", nlp, options)
-
-    def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float] | None:
-        """Clear joint angles for the light at ``target`` (m, on the sphere) nearest ``theta0`` (rad)
-        that IPOPT finds from ``theta0``, with their smallest environment row (m); None when it finds
-        none (checked with pinocchio at θ projected into the limits: |h|∞ and the light's distance to
-        ``target`` ≤ :data:`POSE_TOL`, every row ≥ −:data:`CLEARANCE_TOL`)."""
-        target = np.asarray(target, float)
-        t1, t2 = _tangent_basis((target - self.sphere.center) / self.sphere.radius)
-        theta0 = np.asarray(theta0, float)
-        out = self.nlp(
-            x0=theta0,
-            p=np.r_[theta0, target, t1, t2],
-            lbx=self.robot.lower,
-            ubx=self.robot.upper,
-            lbg=self._lbg,
-            ubg=self._ubg,
-        )
-        if not self.nlp.stats()["success"]:
-            return None
-        # IPOPT relaxes the bounds by ~1e-8 relative: projected into the limits, checked there
-        theta = np.clip(np.asarray(out["x"], float).ravel(), self.robot.lower, self.robot.upper)
-        position, rotation = self.robot.light_pose(theta)
-        h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
-        clearance, _ = self.environment.worst_sphere_row(self.robot, theta)
-        ok = (
-            h <= POSE_TOL
-            and float(np.linalg.norm(position - target)) <= POSE_TOL
-            and clearance >= -CLEARANCE_TOL
-        )
-        return (theta, clearance) if ok else None
-
-
-def _tangent_basis(u: Array) -> tuple[Array, Array]:
-    """Two unit vectors orthogonal to the unit vector u and to each other."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = np.cross(u, helper)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(u, t1)
-
-
 def reachability_map(
     problem: Problem,
     zenith_step_deg: float = 5.0,
@@ -299,7 +213,9 @@ def reachability_map(
     ``robot`` defaults to ``load_robot(problem)``, ``environment`` to the problem's (used only when
     it is enabled); IK settings from ``problem.solver``.
     """
-    from optlight.environment import Environment  # optlight.environment imports optlight.robot
+    # both import optlight.robot
+    from optlight.environment import Environment
+    from optlight.planning.placement import ClearPosture
 
     robot = robot if robot is not None else load_robot(problem)
     if not problem.environment.enabled:
@@ -320,7 +236,7 @@ def reachability_map(
     residual = np.full((n_z, n_a), np.nan)
     taken = np.zeros((n_z, n_a), bool)
     clearance = np.full((n_z, n_a), np.nan)
-    clear_light: ClearLight | None = None
+    posture: ClearPosture | None = None
     t0 = time.perf_counter()
     for i, zen in enumerate(zenith):
         for j, azi in enumerate(azimuth):
@@ -339,13 +255,13 @@ def reachability_map(
             if environment is not None:
                 clearance[i, j] = environment.worst_sphere_row(robot, res.theta)[0]
                 if clearance[i, j] < 0.0:
-                    if clear_light is None:
-                        clear_light = ClearLight(robot, sphere, environment, problem)
+                    if posture is None:
+                        posture = ClearPosture(problem, robot, environment)
                     target = sphere.position(zen, azi)
-                    found = clear_light.solve(target, res.theta) or clear_light.solve(target, start)
+                    found = posture.solve(target, res.theta) or posture.solve(target, start)
                     taken[i, j] = found is None
                     if found is not None:
-                        theta[i, j], clearance[i, j] = found
+                        theta[i, j], clearance[i, j], _ = found
             manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
     return ReachabilityMap(
         robot.name,
