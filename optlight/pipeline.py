@@ -36,7 +36,7 @@ from optlight.errors import SolverError, UnreachableError
 from optlight.geometry import LightSphere
 from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
 from optlight.planning.path import LightPath, azimuth_order, build_path, shortest_open_tour
-from optlight.planning.placement import LightPlacement
+from optlight.planning.placement import ClearPosture, LightPlacement
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, TrajectoryOptimizer
 from optlight.robot import IKResult, Robot, generalized_ik, ik_settings, load_robot
@@ -183,13 +183,13 @@ def place_landmarks(
     problem's, camera resolution) is built from ``problem`` then when not given.
 
     With ``[environment] enabled`` (``environment``: the problem's, built from it when not given) the
-    IK solution must also clear it: every row of :meth:`Environment.sphere_clearance` (the NLPs'
+    joint angles must also clear it: every row of :meth:`Environment.sphere_clearance` (the NLPs'
     sphere model: clearance, and the view cone, a landmark being a capture) ≥ 0. The IK does not see
-    the environment, so a solution that breaks a row is retried from θ_ref and then goes to the
-    placement NLP (warm-started from the attempt with the larger clearance), which has those rows as
-    constraints: it finds joint angles clear of the environment for the same light when there are
-    any (the landmark's cost is the optimum on its azimuth), or moves the landmark along its azimuth
-    to the best light that has them.
+    the environment, but a redundant arm has other postures for the same light: where the IK's
+    breaks a row, :class:`ClearPosture` looks for the nearest clear one (the light unchanged), from the
+    IK from the previous landmark, then from θ_ref. Where neither has one, the placement NLP, which
+    has the rows as constraints, runs from the attempt with the larger clearance: it moves the
+    landmark along its azimuth to the best light with a clear posture.
 
     Returns the landmarks kept, their joint angles (M, n) and warnings. Raises
     :class:`UnreachableError` naming the first landmark neither IK nor the placement reaches (with
@@ -197,34 +197,41 @@ def place_landmarks(
     """
     kept, thetas, notes = [], [], []
     placement: LightPlacement | None = None
+    posture: ClearPosture | None = None
     if not problem.environment.enabled:
         environment = None
     elif environment is None:
         environment = Environment.from_problem(problem)
     previous = robot.theta_ref
     for lm in landmarks:
-        attempts: list[tuple[IKResult, float, str]] = []
+        # (IK result, its clearance (m) and blocking row, clear joint angles for the light or None)
+        attempts: list[tuple[IKResult, float, str, Array | None]] = []
         for start in (previous, robot.theta_ref):
             result = _ik(robot, sphere, lm.position, start, problem)
-            clearance, row = (
-                environment.worst_sphere_row(robot, result.theta) if environment is not None else (np.inf, "")
-            )
-            attempts.append((result, clearance, row))
-            if result.success and clearance >= 0.0:
+            clearance, row, clear = np.inf, "", result.theta if result.success else None
+            if environment is not None and result.success:
+                clearance, row = environment.worst_sphere_row(robot, result.theta)
+                if clearance < 0.0:
+                    posture = posture if posture is not None else ClearPosture(problem, robot, environment)
+                    found = posture.solve(lm.position, result.theta)
+                    clear = found[0] if found is not None else None
+            attempts.append((result, clearance, row, clear))
+            if clear is not None:
                 break
-        if result.success and clearance >= 0.0:
+        if clear is not None:
             kept.append(lm)
-            thetas.append(result.theta)
-            previous = result.theta
+            thetas.append(clear)
+            previous = clear
             continue
         # the placement starts from the better attempt (reached before not; then the larger
         # clearance, or the smaller residual), then from the other
         attempts.sort(key=lambda a: (not a[0].success, -a[1] if a[0].success else a[0].residual))
-        result, clearance, row = attempts[0]
+        result, clearance, row, _ = attempts[0]
         why = (
             f"out of reach of {robot.name}: {result.message}"
             if not result.success
-            else f"blocked for {robot.name}: its IK solution brings {row} {-clearance * 1e3:.1f} mm too close"
+            else f"blocked for {robot.name}: its IK solution brings {row} {-clearance * 1e3:.1f} mm too close, "
+            "and no posture near it is clear"
         )
         if placement is None:
             scene = scene if scene is not None else Scene.from_problem(problem)
@@ -264,10 +271,10 @@ def place_landmarks(
                 f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
             )
             continue
-        clear = " clear of the environment" if environment is not None else ""
+        clear_of = " clear of the environment" if environment is not None else ""
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
-            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear} within "
+            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear_of} within "
             f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
             f"(placement NLP: {placed.message})"
         )

@@ -6,6 +6,7 @@ trajectory through the table and a light in the camera's view cone are caught by
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from pathlib import Path
 
@@ -14,9 +15,13 @@ import pytest
 
 import optlight
 from optlight.environment import LIGHT, VIEW_CONE, Environment
-from optlight.errors import VerificationError
+from optlight.errors import UnreachableError, VerificationError
+from optlight.pipeline import place_landmarks
+from optlight.planning.landmarks import Landmark
+from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.robot import Robot, generalized_ik
+from optlight.scene import Scene
 from optlight.spec import Problem, load_problem, problem_from_dict
 from optlight.verify import ENVIRONMENT_CHECKS, CheckResult, VerificationReport, verify_trajectory
 
@@ -178,7 +183,8 @@ def test_a_light_in_the_view_cone_is_caught() -> None:
 
 
 def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
-    """The issue's problem: table, camera stand, wall and the view cone at the captures."""
+    """The issue's problem: table, camera stand, wall and the view cone at the captures (the
+    placement NLP gives the landmarks whose IK solution breaks a row clear joint angles)."""
     problem = reduced("table_wall")
     plan = solve_quietly(problem)
     assert plan.verification.passed, plan.verification.summary()
@@ -192,3 +198,42 @@ def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
     report = verify_in(free.robot, free.trajectory, problem, landmarks)
     assert report.counts["clearance"] > 0 and report.counts["view_cone"] > 0
     assert any(v.check == "clearance" and (v.joint or "").endswith("↔ wall") for v in report.violations)
+
+
+def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
+    """table_wall: the IK's arm for the light at zenith 30°, azimuth 0° runs the elbow into the wall;
+    ClearPosture finds a clear posture for the same light, and the placement NLP with the
+    environment's rows one for the best light on that azimuth. At 157.5° (the far side of the cap,
+    where the arm only reaches over the view cone) no light of the azimuth has a clear arm: the
+    landmark is named, with the row that blocks it."""
+    problem = reduced("table_wall")
+    robot = optlight.load_robot(problem)
+    scene = Scene.from_problem(problem)
+    env = Environment.from_problem(problem)
+    placement = LightPlacement(problem, scene, robot, environment=env)
+    assert placement.environment is env
+
+    ik = generalized_ik(robot, scene.sphere, (math.radians(30.0), 0.0), robot.theta_ref)
+    row, label = env.worst_sphere_row(robot, ik.theta)
+    assert ik.success and row < -0.02 and label.endswith("↔ wall")
+    light = scene.sphere.position(math.radians(30.0), 0.0)
+    found = ClearPosture(problem, robot, env).solve(light, ik.theta)
+    assert found is not None
+    theta, row, label = found
+    assert row >= -CLEARANCE_TOL and env.worst_sphere_row(robot, theta) == (row, label)
+    assert np.linalg.norm(robot.light_pose(theta)[0] - light) <= POSE_TOL
+    placed = placement.solve(0.0, ik.theta)
+    assert placed.success, placed.message
+    assert math.cos(placed.azimuth) == pytest.approx(1.0, abs=1e-9)  # azimuth 0 (or 2π)
+    clearance, view = env.sphere_clearance(robot, placed.theta)
+    assert min(clearance.min(), view.min()) == pytest.approx(placed.min_clearance_m, abs=1e-12)
+    assert placed.min_clearance_m >= -CLEARANCE_TOL
+
+    azimuth = math.radians(157.5)
+    zenith = math.radians(30.0)
+    blocked = Landmark(0, zenith, azimuth, scene.sphere.position(zenith, azimuth), 0.0, "refined", "", 0, 0.0)
+    with pytest.raises(UnreachableError, match="blocked for panda") as error:
+        place_landmarks(problem, robot, scene.sphere, [blocked], scene=scene, environment=env)
+    message = str(error.value)
+    assert "azimuth 157.5°" in message and f"↔ {VIEW_CONE}" in message
+    assert "nor is any light on its azimuth clear of the environment" in message
