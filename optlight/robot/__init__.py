@@ -7,7 +7,8 @@
   (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (DESIGN §3) and the
   light's sphere coordinates :func:`light_angles`.
 - :func:`generalized_ik` (:mod:`.ik`, tasks in :mod:`.tasks`): δθ = J# e + (I − J⁺J) γ.
-- :func:`reachability_map` (:mod:`.reach`): IK success and manipulability over the light cap.
+- :func:`reachability_map` (:mod:`.reach`): IK success and manipulability over the light cap, and the
+  cells the environment takes away (reached only by colliding or blocking the camera).
 """
 
 from optlight.robot.ik import DEFAULT_GAINS, IKResult, generalized_ik, ik_settings, null_space_step
