@@ -418,8 +418,7 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
     done()
 
     done = stage("timing")
-    # a single landmark is a segment of zero length: the trajectory is its dwell
-    segments = [nlp.theta[s] for s in path.segments()] or [np.repeat(nlp.theta[:1], 2, axis=0)]
+    segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]  # one landmark: its dwell
     trajectory = time_parameterize(
         segments,
         robot.velocity_limit * problem.robot.velocity_scale,

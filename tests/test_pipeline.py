@@ -123,3 +123,11 @@ def test_partial_plans_drop_unreachable_landmarks_with_a_warning() -> None:
     assert dropped and 0 < len(plan.visited) == 8 - len(dropped)
     assert any("out of reach" in str(w.message) for w in caught)
     assert plan.verification.passed
+
+
+def test_a_single_landmark_is_one_dwell(tmp_path: Path) -> None:
+    plan = optlight.solve(small_problem(landmarks={"count": 1}))
+    assert len(plan.visited) == 1 and plan.verification.passed
+    assert plan.trajectory.duration == pytest.approx(plan.problem.trajectory.dwell_s)
+    plan.save(tmp_path / "one", preview=False)
+    assert (tmp_path / "one" / "lights.lp").read_text().splitlines()[0] == "1"

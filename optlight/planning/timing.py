@@ -380,7 +380,8 @@ def time_parameterize(
     Args:
         segments: M−1 arrays of shape (K_i ≥ 2, n), joint waypoints (rad) from landmark i to i+1;
             segment i ends where segment i+1 starts (within :data:`JOINT_TOLERANCE`). A segment
-            whose waypoints all coincide gets zero motion time.
+            whose waypoints all coincide gets zero motion time. A single (1, n) array is a single
+            landmark: the trajectory is its dwell.
         velocity_limit, acceleration_limit: (n,) positive limits.
         dwell_s: time (s) the robot stays at each landmark, the first and the last included.
         gridpoints: initial number of TOPPRA gridpoints per segment (uniform in s); default: chosen
@@ -397,6 +398,9 @@ def time_parameterize(
     if not waypoints:
         raise ValueError("at least one segment is needed")
     n = waypoints[0].shape[1] if waypoints[0].ndim == 2 else 0
+    if len(waypoints) == 1 and waypoints[0].shape[0] == 1 and n > 0 and np.isfinite(waypoints[0]).all():
+        # a single landmark: the trajectory is its dwell
+        return Trajectory([_Hold(waypoints[0][0], float(dwell_s))], [(0.0, float(dwell_s))], [], joint_names)
     for i, w in enumerate(waypoints):
         if w.ndim != 2 or w.shape[0] < 2 or w.shape[1] != n or n == 0:
             raise ValueError(f"segment {i}: expected a (K ≥ 2, {n}) array of waypoints, got shape {w.shape}")

@@ -7,7 +7,7 @@ position and rotation from the symbolic forward kinematics:
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
-- joint bounds, and |θ_{k+1} − θ_k| ≤ max_step per joint;
+- joint bounds (minus :data:`LIMIT_MARGIN`), and |θ_{k+1} − θ_k| ≤ max_step per joint;
 - with an environment (:mod:`optlight.environment`): clearance c(θ_k) ≥ 0 at every knot (robot
   spheres to obstacles and to each other, margins included) and the view cone kept clear,
   v(θ_k) ≥ 0, at the landmark knots (view "capture") or at every knot (view "path").
@@ -34,6 +34,10 @@ from optlight.geometry import LightSphere
 from optlight.planning.path import LightPath
 
 Array = NDArray[np.float64]
+
+#: Distance (rad) the knots keep from the joint limits, so that the spline TOPPRA times through them
+#: stays inside the limits between knots (a knot exactly on a bound let it overshoot by ~2e-6 rad).
+LIMIT_MARGIN = 5e-3
 
 
 @dataclass(frozen=True)
@@ -202,8 +206,9 @@ class TrajectoryOptimizer:
         per_knot[:, 15:18] = path.positions
         p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
         lbg, ubg = self.bounds(n_knots, len(landmark_knots))
-        lbx = np.tile(self.robot.lower, n_knots)
-        ubx = np.tile(self.robot.upper, n_knots)
+        # knots keep LIMIT_MARGIN from the joint limits: the timed spline through them may overshoot
+        lbx = np.tile(self.robot.lower + LIMIT_MARGIN, n_knots)
+        ubx = np.tile(self.robot.upper - LIMIT_MARGIN, n_knots)
         x0 = np.clip(np.asarray(theta0, float).ravel(), lbx, ubx)
         start = time.perf_counter()
         out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
