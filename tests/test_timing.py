@@ -194,7 +194,10 @@ def test_bad_inputs_are_rejected_with_context() -> None:
     with pytest.raises(ValueError, match="velocity_limit"):
         time_parameterize(_segments(LANDMARKS), [1.0, 0.0, 1.0], AMAX, 0.1)
     with pytest.raises(ValueError, match="segment 0"):
-        time_parameterize([np.zeros((1, 3))], VMAX, AMAX, 0.1)
+        time_parameterize([np.zeros((1, 3)), np.zeros((2, 3))], VMAX, AMAX, 0.1)
+    lone = time_parameterize([np.ones((1, 3))], VMAX, AMAX, 0.1)  # a single landmark: its dwell
+    assert lone.duration == 0.1 and lone.capture_times.tolist() == [0.05]
+    np.testing.assert_array_equal(lone.sample([0.0, 0.1])[0], np.ones((2, 3)))
     with pytest.raises(ValueError, match="dwell_s"):
         time_parameterize(_segments(LANDMARKS), VMAX, AMAX, -1.0)
     traj = time_parameterize(_segments(LANDMARKS), VMAX, AMAX, 0.1)

@@ -398,11 +398,9 @@ def time_parameterize(
     if not waypoints:
         raise ValueError("at least one segment is needed")
     n = waypoints[0].shape[1] if waypoints[0].ndim == 2 else 0
-    if len(waypoints) == 1 and waypoints[0].shape[0] == 1 and n > 0 and np.isfinite(waypoints[0]).all():
-        # a single landmark: the trajectory is its dwell
-        return Trajectory([_Hold(waypoints[0][0], float(dwell_s))], [(0.0, float(dwell_s))], [], joint_names)
+    lone = len(waypoints) == 1 and waypoints[0].ndim == 2 and waypoints[0].shape[0] == 1  # one landmark
     for i, w in enumerate(waypoints):
-        if w.ndim != 2 or w.shape[0] < 2 or w.shape[1] != n or n == 0:
+        if w.ndim != 2 or w.shape[0] < (1 if lone else 2) or w.shape[1] != n or n == 0:
             raise ValueError(f"segment {i}: expected a (K ≥ 2, {n}) array of waypoints, got shape {w.shape}")
         if not np.isfinite(w).all():
             raise ValueError(f"segment {i}: waypoints are not finite")
@@ -422,6 +420,8 @@ def time_parameterize(
 
     pieces: list[_Piece] = [_Hold(waypoints[0][0], float(dwell_s))]
     intervals = [(0.0, float(dwell_s))]
+    if lone:
+        return Trajectory(pieces, intervals, [], joint_names)
     seg_times = []
     t = float(dwell_s)
     for i, w in enumerate(waypoints):
