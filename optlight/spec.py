@@ -26,6 +26,9 @@ from optlight.errors import ProblemError
 
 Vec3 = tuple[float, float, float]
 
+#: Robots that load by name (example-robot-data); :mod:`optlight.robot.loading` has their details.
+ROBOT_NAMES: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
+
 #: Folder of the built-in problem files (the repository's ``problems/``).
 PROBLEMS_DIR = Path(__file__).resolve().parent.parent / "problems"
 
@@ -288,7 +291,9 @@ class SolverSpec:
         0.0, "null-space gain of manipulability (−log w) in the generalized IK (0 = off)", lo=0.0
     )
     ik_posture_gain: float = key(
-        0.0, "null-space gain of the posture task (towards the reference) in the generalized IK (0 = off)", lo=0.0
+        0.0,
+        "null-space gain of the posture task (towards the reference) in the generalized IK (0 = off)",
+        lo=0.0,
     )
     verbose: bool = key(False, "print solver output")
 
@@ -378,7 +383,9 @@ class EnvironmentSpec:
         "keep the robot and the light out of the camera's view of the object at capture times, "
         "along the whole path, or nowhere",
     )
-    view_margin_deg: float = key(1.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0)
+    view_margin_deg: float = key(
+        1.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0
+    )
     spheres_per_link: int = key(
         4, "most spheres fitted to one link's collision geometry (the NLPs' approximation)", lo=1, hi=16
     )
@@ -611,6 +618,13 @@ def _check_consistency(p: Problem, file: str) -> None:
     for i, term in enumerate(p.objective.terms):
         if term.kind in ("mean", "contrast") and term.target is None:
             raise ProblemError(file, f"objective.terms[{i}].target", f"a target value (kind = '{term.kind}')")
+    if p.robot.urdf is None and p.robot.name not in ROBOT_NAMES:
+        raise ProblemError(
+            file,
+            "robot.name",
+            f"one of {', '.join(ROBOT_NAMES)} (or set robot.urdf and robot.frame)",
+            p.robot.name,
+        )
     if p.robot.urdf is not None:
         if not p.resolve(p.robot.urdf).is_file():
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
@@ -644,7 +658,10 @@ def _check_environment(p: Problem, file: str) -> None:
     floor = env.table_height_m
     if floor is not None and center[2] <= floor:
         raise ProblemError(
-            file, "environment.table_height_m", f"a table below the object centre (z = {center[2]:g} m)", floor
+            file,
+            "environment.table_height_m",
+            f"a table below the object centre (z = {center[2]:g} m)",
+            floor,
         )
     if env.camera_body and eye[2] <= (floor if floor is not None else 0.0):
         raise ProblemError(

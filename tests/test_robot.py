@@ -267,3 +267,7 @@ def test_casadi_kinematics_handles_every_joint_type() -> None:
         p, rot = fk(theta)
         assert np.abs(np.array(p).ravel() - data.oMf[tip].translation).max() < 1e-12
         assert np.abs(np.array(rot) - data.oMf[tip].rotation).max() < 1e-12
+
+
+def test_every_robot_name_the_problem_files_accept_loads() -> None:
+    assert set(ROBOTS) == set(SUPPORTED_ROBOTS)

@@ -86,6 +86,7 @@ def test_defaults_fill_missing_keys(tmp_path: Path) -> None:
         (lambda d: d["object"].update(kind="mesh"), "object.path", "mesh file path"),
         (lambda d: d["objective"]["terms"][0].update(kind="mean"), "objective.terms[0].target", "target"),
         (lambda d: d["robot"].update(urdf="nowhere.urdf", frame="tool0"), "robot.urdf", "existing URDF"),
+        (lambda d: d["robot"].update(name="ur99"), "robot.name", "panda, ur3"),
     ],
 )
 def test_bad_values_name_file_and_key(tmp_path: Path, mutate, key: str, fragment: str) -> None:

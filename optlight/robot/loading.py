@@ -57,7 +57,7 @@ from optlight.robot.kinematics import (
     REVOLUTE_JOINTS,
     symbolic_frame_pose,
 )
-from optlight.spec import Problem, RobotSpec
+from optlight.spec import ROBOT_NAMES, Problem, RobotSpec
 
 if TYPE_CHECKING:
     import casadi
@@ -65,7 +65,7 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 
 #: Robot names :func:`load_robot` knows (files from example-robot-data).
-SUPPORTED_ROBOTS: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
+SUPPORTED_ROBOTS: tuple[str, ...] = ROBOT_NAMES
 
 #: Limits given to continuous joints, in θ (rad).
 CONTINUOUS_LIMIT = 2 * np.pi
