@@ -19,7 +19,6 @@ the slack over the allowed distance (m; < 0 = violation), which pair and when.
 from __future__ import annotations
 
 import argparse
-import json
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np
 
 import optlight
 from optlight.environment import Environment
+from optlight.export import write_json
 from optlight.spec import Problem, load_problem, problem_from_dict
 from optlight.verify import ENVIRONMENT_CHECKS, VerificationReport, verify_trajectory
 
@@ -171,8 +171,7 @@ def main() -> None:
     result = run(args.problems, args.repeats)
     _print(result)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        write_json(args.json, result)
 
 
 if __name__ == "__main__":

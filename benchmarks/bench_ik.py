@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
-import json
 import os
 import platform
 import time
@@ -38,6 +37,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
+from optlight.export import write_json
 from optlight.geometry import LightSphere, h_residual, sphere_frame
 from optlight.robot import Robot, generalized_ik, load_robot
 
@@ -271,8 +271,7 @@ def main() -> None:
     results = run(args.n, tuple(args.robots.split(",")), args.seed)
     _print(results)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        write_json(args.json, results)
 
 
 if __name__ == "__main__":

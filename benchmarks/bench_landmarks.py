@@ -17,7 +17,6 @@ iterations (median, p98), hardware and versions.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -33,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from baselines import paper_sweep  # noqa: E402
 
+from optlight.export import write_json  # noqa: E402
 from optlight.objectives import Objective  # noqa: E402
 from optlight.planning.landmarks import exact_cost, find_landmarks  # noqa: E402
 from optlight.scene import Scene  # noqa: E402
@@ -157,8 +157,7 @@ def main() -> None:
     result = run(args.problem)
     print_table(result)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        write_json(args.json, result)
 
 
 if __name__ == "__main__":

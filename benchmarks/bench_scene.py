@@ -13,7 +13,6 @@ the cap; the table gives median and 98th percentile wall-clock times in millisec
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 from collections.abc import Callable
@@ -24,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from optlight import load_problem
+from optlight.export import write_json
 from optlight.scene import Scene
 from optlight.scene.gbuffer import build_gbuffer, intersector
 from optlight.scene.luminance import luminance_function
@@ -128,8 +128,7 @@ def main() -> None:
     results = run(args.repeats)
     _print(results)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        write_json(args.json, results)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@ when ``baselines.py`` has it; otherwise the result says the baseline is missing.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -28,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import baselines  # noqa: E402
 
 import optlight  # noqa: E402
+from optlight.export import write_json  # noqa: E402
 from optlight.spec import load_problem  # noqa: E402
 
 #: The per-knot IK baseline in ``baselines.py``: ``per_knot_ik_plan(problem) -> dict``.
@@ -125,8 +125,7 @@ def main() -> None:
     result = run(args.problem, args.repeats)
     _print(result)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2) + "\n")
+        write_json(args.json, result)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
-import json
 import os
 import platform
 import time
@@ -25,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from optlight.export import write_json
 from optlight.planning.timing import Trajectory, time_parameterize
 
 VELOCITY_LIMIT = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s
@@ -158,8 +158,7 @@ def main() -> None:
     results = run(args.repeats)
     _print(results)
     if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(results, indent=2) + "\n")
+        write_json(args.json, results)
 
 
 if __name__ == "__main__":

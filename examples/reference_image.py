@@ -89,19 +89,9 @@ def main() -> None:
     print(f"wrote {optlight.save_gray_png(args.out / 'best.png', scene.render(best.position), saturation)}")
 
     if args.view:
-        robot = optlight.load_robot(problem)
-        ik = optlight.generalized_ik(robot, scene.sphere, best.position)
-        if not ik.success:
-            print(f"{robot.name} does not reach that landmark ({ik.message}): shown at the closest pose")
-        preview = optlight.Preview(
-            scene,
-            robot,
-            landmarks.positions,
-            landmarks.costs,
-            np.empty((0, 3)),
-            theta=ik.theta,
-            light_position=best.position,
-        )
+        preview = optlight.Preview.at_best_landmark(scene, optlight.load_robot(problem), landmarks)
+        if not preview.reached:
+            print("the robot does not reach that landmark: shown at the closest pose it found")
         preview.show("robot holding the light at the best landmark")
 
 

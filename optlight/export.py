@@ -79,6 +79,15 @@ def image_names(pattern: str, count: int) -> list[str]:
     return names
 
 
+def write_json(path: str | Path, data: Any) -> Path:
+    """Write ``data`` (made JSON-safe by :func:`json_safe`) to ``path`` as indented JSON, creating
+    the parent folders; returns the path."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(json_safe(data), indent=2, allow_nan=False) + "\n")
+    return out
+
+
 def json_safe(value: Any, where: str = "") -> Any:
     """``value`` as plain JSON data: NumPy arrays and scalars to lists and numbers, tuples to lists,
     dataclasses and mappings to dicts (keys as strings), paths to strings, enums to their values,

@@ -20,7 +20,7 @@ from optlight.geometry import great_circle
 from optlight.planning.timing import time_parameterize
 from optlight.robot import load_robot
 from optlight.scene import Scene
-from optlight.spec import LightSpec, problem_from_dict
+from optlight.spec import LightSpec, load_problem, problem_from_dict
 from optlight.viz.preview import (
     Preview,
     animation_times,
@@ -272,3 +272,21 @@ def test_show_serves_until_enter_then_stops(preview, monkeypatch, capsys):
     assert seen["servers"] == 1
     assert "live preview at http://127.0.0.1:" in capsys.readouterr().out
     assert {p.pid for p in psutil.Process().children(recursive=True)} <= before
+
+
+def test_at_best_landmark_holds_the_light_there() -> None:
+    from optlight import find_landmarks, load_robot
+    from optlight.scene import Scene
+
+    data = load_problem("default").to_dict()
+    data["camera"].update(width=48, height=48)
+    data["landmarks"].update(count=4)
+    problem = problem_from_dict(data, source=load_problem("default").source)
+    scene = Scene.from_problem(problem)
+    landmarks = find_landmarks(problem, scene)
+    robot = load_robot(problem)
+    preview = Preview.at_best_landmark(scene, robot, landmarks)
+    best = min(landmarks.landmarks, key=lambda lm: lm.cost)
+    assert preview.reached
+    # within the IK tolerance |e|² < 1e-9 (m²)
+    assert np.linalg.norm(robot.light_pose(preview.theta)[0] - best.position) < np.sqrt(1e-9)

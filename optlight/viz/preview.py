@@ -150,6 +150,8 @@ class Preview:
         else:
             theta0 = np.asarray(robot.theta_ref, float)
         self.theta = theta0
+        #: whether the robot holds the light where it should (see :meth:`at_best_landmark`)
+        self.reached = True
         self._data = robot.model.createData()
         self.light_pose = self._light_placement(theta0)
         joint_positions = np.array([placement.translation for placement in self._data.oMi])
@@ -203,6 +205,27 @@ class Preview:
         with MeshcatServer() as server:
             server.send(self._recorder.commands())
             yield server.web_url
+
+    @classmethod
+    def at_best_landmark(cls, scene: SceneLike, robot: RobotLike, landmarks: Any) -> Preview:
+        """The landmarks of a search (a :class:`LandmarkSet`, coloured by cost) with the robot holding
+        the light at the lowest-cost one, by generalized IK; ``reached`` says whether the IK
+        converged (otherwise the robot is shown at the closest pose it found)."""
+        from optlight.robot import generalized_ik
+
+        best = min(landmarks.landmarks, key=lambda lm: lm.cost)
+        ik = generalized_ik(robot, scene.sphere, best.position)  # type: ignore[arg-type]
+        preview = cls(
+            scene,
+            robot,
+            landmarks.positions,
+            landmarks.costs,
+            np.empty((0, 3)),
+            theta=ik.theta,
+            light_position=best.position,
+        )
+        preview.reached = ik.success
+        return preview
 
     def show(self, what: str = "") -> None:
         """Serve the scene live (:meth:`serve`), print its URL and wait until the user presses Enter
