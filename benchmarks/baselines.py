@@ -77,29 +77,29 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     the joint path length Σ|Δθ| (rad), the motion time without dwells (s), the largest |h| over the
     knots (m, pinocchio) and whether the timed trajectory passes verification.
     """
-    from optlight import pipeline
     from optlight.geometry import h_residual
+    from optlight.plan import joint_path_length
     from optlight.planning.landmarks import find_landmarks
     from optlight.planning.path import build_path
+    from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
     from optlight.planning.timing import time_parameterize
-    from optlight.robot import load_robot
+    from optlight.setup import Setup
     from optlight.verify import verify_trajectory
 
     start = time.perf_counter()
-    scene = Scene.from_problem(problem)
-    robot = load_robot(problem)
-    sphere = scene.sphere
-    landmarks = find_landmarks(problem, scene)
-    kept, thetas, _ = pipeline.place_landmarks(problem, robot, sphere, landmarks.landmarks)
-    order = pipeline.visiting_order(problem, kept, thetas)
-    positions = np.array([kept[i].position for i in order])
+    setup = Setup.from_problem(problem)
+    robot, sphere, limits = setup.robot, setup.sphere, setup.limits
+    landmarks = find_landmarks(setup)
+    placement = place_landmarks(setup, landmarks.landmarks)
+    order = visiting_order(setup, placement)
+    positions = np.array([placement.landmarks[i].position for i in order])
     path = build_path(sphere, positions, np.arange(len(order)), math.radians(problem.trajectory.knot_spacing_deg))
-    knots, _ = pipeline.knot_ik(problem, robot, sphere, path, thetas[order[0]])
-    velocity = robot.velocity_limit * problem.robot.velocity_scale
+    knots, _ = knot_ik(setup, path, placement.thetas[order[0]])
+    velocity = limits.velocity
     trajectory = time_parameterize(
         [knots[s] for s in path.segments()] or [knots[:1]],
         velocity,
-        robot.acceleration_limit,
+        limits.acceleration,
         problem.trajectory.dwell_s,
     )
     elapsed = time.perf_counter() - start
@@ -120,7 +120,7 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     intervals = trajectory.landmark_intervals
     return {
         "time_s": elapsed,
-        "joint_path_length": pipeline.joint_path_length(knots),
+        "joint_path_length": joint_path_length(knots),
         "motion_time": float(trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0])),
         "max_h_residual": h,
         "verification_passed": report.passed,

@@ -50,13 +50,13 @@ def unconstrained(problem: Problem) -> Problem:
 
 def verify_in_environment(plan: optlight.Plan, environment: Environment) -> VerificationReport:
     """The pipeline's verification of ``plan``'s trajectory, with ``environment``'s exact checks."""
-    robot, problem = plan.robot, plan.problem
+    robot = plan.robot
     return verify_trajectory(
         plan.trajectory,
         light_pose=robot.light_pose,
         lower=robot.lower,
         upper=robot.upper,
-        velocity_limit=robot.velocity_limit * problem.robot.velocity_scale,
+        velocity_limit=plan.setup.limits.velocity,
         acceleration_limit=robot.acceleration_limit,
         sphere=plan.scene.sphere,
         landmark_positions=np.array([lm.position for lm in plan.visited]),

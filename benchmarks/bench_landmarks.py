@@ -33,9 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from baselines import paper_sweep  # noqa: E402
 
 from optlight.export import write_json  # noqa: E402
-from optlight.objectives import Objective  # noqa: E402
 from optlight.planning.landmarks import exact_cost, find_landmarks  # noqa: E402
-from optlight.scene import Scene  # noqa: E402
+from optlight.setup import Setup
 from optlight.spec import load_problem  # noqa: E402
 
 #: Costs at or below this count as zero (the reference light reproduced exactly).
@@ -50,11 +49,11 @@ def _dist(values: np.ndarray) -> dict[str, float]:
 def run(problem: str = "default") -> dict[str, Any]:
     """Both searches on ``problem``; returns the machine-readable results (angles in degrees)."""
     spec = load_problem(problem)
-    scene = Scene.from_problem(spec)
-    objective = Objective.from_problem(spec, scene)
+    setup = Setup.from_problem(spec)
+    scene, objective = setup.scene, setup.objective
 
     t0 = time.perf_counter()
-    ours = find_landmarks(spec, scene)
+    ours = find_landmarks(setup)
     ours_time = time.perf_counter() - t0
 
     t0 = time.perf_counter()

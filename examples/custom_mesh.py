@@ -112,7 +112,7 @@ def main() -> None:
             f"{100 * shadowed:.1f}% of the relief in cast shadow"
         )
 
-    landmarks = optlight.find_landmarks(problem, scene)
+    landmarks = optlight.find_landmarks(optlight.Setup.from_problem(problem))
     print(
         f"{len(landmarks)} landmarks in {landmarks.time_s:.1f} s ({landmarks.iterations} IPOPT iterations):"
     )

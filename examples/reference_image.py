@@ -71,7 +71,7 @@ def main() -> None:
         ),
         landmarks=dataclasses.replace(base.landmarks, mode="free", count=args.landmarks),
     )
-    landmarks = optlight.find_landmarks(problem, scene)
+    landmarks = optlight.find_landmarks(optlight.Setup.from_problem(problem))
     print(
         f"{len(landmarks)} free landmarks in {landmarks.time_s:.1f} s "
         f"({landmarks.iterations} IPOPT iterations), in search order:"

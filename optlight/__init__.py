@@ -27,23 +27,28 @@ from optlight.errors import (
 from optlight.geometry import LightSphere
 from optlight.spec import Problem, available_problems, load_problem, problem_from_dict
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks they agree)
     from optlight.objectives import Objective
-    from optlight.pipeline import Plan, solve
+    from optlight.pipeline import solve
+    from optlight.plan import Plan
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
+    from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import Trajectory, time_parameterize
-    from optlight.robot import IKResult, ReachabilityMap, Robot, generalized_ik, load_robot, reachability_map
+    from optlight.robot import IKResult, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
+    from optlight.setup import Setup
     from optlight.verify import VerificationReport, verify_trajectory
     from optlight.viz.images import save_gray_png
     from optlight.viz.preview import Preview
 
 __version__ = "0.1.0"
 
+#: The public names imported on first use, and the module that defines each.
 _LAZY = {
     "Camera": "optlight.scene",
     "Scene": "optlight.scene",
     "Objective": "optlight.objectives",
+    "Setup": "optlight.setup",
     "Landmark": "optlight.planning.landmarks",
     "LandmarkSet": "optlight.planning.landmarks",
     "find_landmarks": "optlight.planning.landmarks",
@@ -51,13 +56,13 @@ _LAZY = {
     "IKResult": "optlight.robot",
     "load_robot": "optlight.robot",
     "generalized_ik": "optlight.robot",
-    "ReachabilityMap": "optlight.robot",
-    "reachability_map": "optlight.robot",
+    "ReachabilityMap": "optlight.planning.reach",
+    "reachability_map": "optlight.planning.reach",
     "Trajectory": "optlight.planning.timing",
     "time_parameterize": "optlight.planning.timing",
     "VerificationReport": "optlight.verify",
     "verify_trajectory": "optlight.verify",
-    "Plan": "optlight.pipeline",
+    "Plan": "optlight.plan",
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
     "save_gray_png": "optlight.viz.images",
@@ -73,36 +78,18 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module 'optlight' has no attribute {name!r}")
 
 
+#: The public API: the names imported above, then the lazy ones.
 __all__ = [
-    "Camera",
-    "IKResult",
-    "Landmark",
-    "LandmarkSet",
     "LightSphere",
-    "Objective",
     "OptlightError",
-    "Plan",
-    "Preview",
     "Problem",
     "ProblemError",
-    "ReachabilityMap",
-    "Robot",
     "RobotError",
-    "Scene",
     "SolverError",
-    "Trajectory",
     "UnreachableError",
     "VerificationError",
-    "VerificationReport",
     "available_problems",
-    "find_landmarks",
-    "generalized_ik",
     "load_problem",
     "problem_from_dict",
-    "save_gray_png",
-    "load_robot",
-    "reachability_map",
-    "solve",
-    "time_parameterize",
-    "verify_trajectory",
+    *_LAZY,
 ]

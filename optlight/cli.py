@@ -20,7 +20,11 @@ from optlight.spec import available_problems, load_problem
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    problem = load_problem(args.problem)
+    from optlight.setup import Setup
+
+    # building the setup checks what the file alone cannot show (mesh, URDF and frame, reference
+    # image, the camera's view of the object, the environment's layout)
+    problem = Setup.from_problem(load_problem(args.problem)).problem
     print(f"{problem.source}: valid ({problem.description})")
     return 0
 
@@ -99,10 +103,12 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
 
 
 def _cmd_reach(args: argparse.Namespace) -> int:
-    from optlight.robot import reachability_map
+    from optlight.planning.reach import reachability_map
+    from optlight.setup import Setup
 
     problem = load_problem(args.problem)
-    result = reachability_map(problem, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
+    setup = Setup.from_problem(problem)
+    result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     png, js = result.save(args.out)
     print(f"{100 * result.reachable_fraction:.1f}% of the light cap reachable by {problem.robot.name}")
     if result.environment:
@@ -121,14 +127,14 @@ def _cmd_problems(args: argparse.Namespace) -> int:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     import importlib.util
-    from pathlib import Path
 
+    # the benchmarks live in the source repository, next to the package, not inside it
     runner = Path(__file__).resolve().parent.parent / "benchmarks" / "run.py"
     spec = importlib.util.spec_from_file_location("optlight_benchmarks.run", runner)
     if not runner.is_file() or spec is None or spec.loader is None:
         raise OptlightError(
-            f"no benchmark runner at {runner}: `optlight bench` needs the source checkout "
-            "(pip install -e . from the repository), or run `python benchmarks/run.py` there"
+            "the benchmarks live in the source repository's benchmarks/ folder, not in the installed "
+            "package: clone the repository and run `optlight bench` (or `make bench`) there"
         )
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module

@@ -11,12 +11,9 @@ camera frame (x right, y down, z forward) that is (d_x, −d_y, −d_z): see :fu
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
-import enum
 import importlib.metadata
 import json
-import math
 import os
 import shutil
 import uuid
@@ -28,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import VerificationError
+from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
 from optlight.verify import VerificationReport
 
@@ -86,33 +84,6 @@ def write_json(path: str | Path, data: Any) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(json_safe(data), indent=2, allow_nan=False) + "\n")
     return out
-
-
-def json_safe(value: Any, where: str = "") -> Any:
-    """``value`` as plain JSON data: NumPy arrays and scalars to lists and numbers, tuples to lists,
-    dataclasses and mappings to dicts (keys as strings), paths to strings, enums to their values,
-    non-finite floats to None. Anything else raises TypeError naming where it was found."""
-    if value is None or isinstance(value, bool | str):
-        return value
-    if isinstance(value, int | np.integer) and not isinstance(value, np.bool_):
-        return int(value)
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, np.ndarray):
-        return json_safe(value.tolist(), where)
-    if isinstance(value, Path):
-        return str(value)
-    if isinstance(value, enum.Enum):
-        return json_safe(value.value, where)
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return json_safe({f.name: getattr(value, f.name) for f in dataclasses.fields(value)}, where)
-    if isinstance(value, Mapping):
-        return {str(k): json_safe(v, f"{where}.{k}" if where else str(k)) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [json_safe(v, f"{where}[{i}]") for i, v in enumerate(value)]
-    raise TypeError(f"{where or 'value'}: cannot write {type(value).__name__} to JSON")
 
 
 def library_versions() -> dict[str, str | None]:

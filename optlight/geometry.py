@@ -12,7 +12,9 @@ All angles in radians, lengths in metres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
+import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -106,8 +108,14 @@ def aim_rotation(position: ArrayLike, center: ArrayLike, reference_x: ArrayLike)
     return np.column_stack([x, np.cross(z, x), z])
 
 
-def h_residual(position: ArrayLike, rotation: ArrayLike, center: ArrayLike, radius: float) -> Array:
+def h_residual(position: Any, rotation: Any, center: Any, radius: Any) -> Any:
     """The light constraints h1–h3 (DESIGN §3): h = R_Lᵀ (O − a_L) − [0, 0, b]; zero iff the
-    light is on the sphere and its +z axis passes through O. Units: metres."""
+    light is on the sphere and its +z axis passes through O. Units: metres.
+
+    The one definition of h: NumPy arrays give a (3,) array; when any argument is a CasADi
+    expression (SX/MX, e.g. the symbolic light pose or a parametrised centre) a 3×1 expression."""
+    if any(isinstance(x, ca.SX | ca.MX) for x in (position, rotation, center, radius)):
+        o = center if isinstance(center, ca.SX | ca.MX) else ca.DM(np.asarray(center, float))
+        return rotation.T @ (o - position) - ca.vertcat(0.0, 0.0, radius)
     r = np.asarray(rotation, float)
     return r.T @ (np.asarray(center, float) - np.asarray(position, float)) - np.array([0.0, 0.0, radius])

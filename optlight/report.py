@@ -1,6 +1,9 @@
 """The results folder of a plan: files, figures, the offline preview and a readable report.
 
-``save_plan(plan, folder)`` writes, all at once or not at all (:func:`optlight.export.write_results`):
+Built from the pieces a solve produces (the setup, the landmark search, the landmarks visited and
+their joint angles, the path, the trajectory NLP, the timed trajectory, the verification), not from
+:class:`~optlight.plan.Plan`, which sits above this module. ``save_results(folder, ...)`` writes, all
+at once or not at all (:func:`optlight.export.write_results`):
 
 - ``trajectory.csv``, ``plan.json``, ``lights.lp`` (relight / PTM light directions);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
@@ -10,26 +13,41 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from optlight.export import write_results
+from optlight.planning.landmarks import Landmark, LandmarkSet
+from optlight.planning.path import LightPath
+from optlight.planning.timing import Trajectory
+from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.setup import Setup
+from optlight.verify import VerificationReport
 from optlight.viz.figures import save_landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
 
-if TYPE_CHECKING:
-    from optlight.pipeline import Plan
+Array = NDArray[np.float64]
 
 
-def plan_dict(plan: Plan) -> dict[str, Any]:
+def plan_dict(
+    setup: Setup,
+    landmarks: LandmarkSet,
+    visited: Sequence[Landmark],
+    landmark_thetas: Array,
+    path: LightPath,
+    nlp: TrajectoryNLPResult,
+    summary: Mapping[str, Any],
+    warnings: Sequence[str],
+) -> dict[str, Any]:
     """What plan.json records besides the trajectory and the verification (which export adds)."""
-    robot, spec = plan.robot, plan.problem.robot
+    problem, robot, spec = setup.problem, setup.robot, setup.problem.robot
     return {
-        "problem": plan.problem.to_dict(),
-        "problem_file": str(plan.problem.source) if plan.problem.source else None,
+        "problem": problem.to_dict(),
+        "problem_file": str(problem.source) if problem.source else None,
         "robot": {
             "name": robot.name,
             "joint_names": robot.joint_names,
@@ -39,8 +57,8 @@ def plan_dict(plan: Plan) -> dict[str, Any]:
             "base_rpy_deg": spec.base_rpy_deg,
             "lower": robot.lower,
             "upper": robot.upper,
-            "velocity_limit": robot.velocity_limit * spec.velocity_scale,
-            "acceleration_limit": robot.acceleration_limit,
+            "velocity_limit": setup.limits.velocity,
+            "acceleration_limit": setup.limits.acceleration,
         },
         "landmarks": [
             {
@@ -56,38 +74,44 @@ def plan_dict(plan: Plan) -> dict[str, Any]:
                 "time_s": lm.time_s,
                 "theta": theta,
             }
-            for i, (lm, theta) in enumerate(zip(plan.visited, plan.landmark_thetas, strict=True))
+            for i, (lm, theta) in enumerate(zip(visited, landmark_thetas, strict=True))
         ],
         "landmark_search": {
-            "mode": plan.landmarks.mode,
-            "reference": plan.landmarks.reference_label,
-            "resolution": plan.landmarks.resolution,
-            "iterations": plan.landmarks.iterations,
-            "time_s": plan.landmarks.time_s,
+            "mode": landmarks.mode,
+            "reference": landmarks.reference_label,
+            "resolution": landmarks.resolution,
+            "iterations": landmarks.iterations,
+            "time_s": landmarks.time_s,
         },
         "trajectory_nlp": {
-            "status": plan.nlp.status,
-            "success": plan.nlp.success,
-            "cost": plan.nlp.cost,
-            "iterations": plan.nlp.iterations,
-            "max_h_residual_m": plan.nlp.max_h_residual,
-            "time_s": plan.nlp.time_s,
-            "knots": plan.path.n_knots,
-            "landmark_knots": plan.path.landmark_knots,
+            "status": nlp.status,
+            "success": nlp.success,
+            "cost": nlp.cost,
+            "iterations": nlp.iterations,
+            "max_h_residual_m": nlp.max_h_residual,
+            "time_s": nlp.time_s,
+            "knots": path.n_knots,
+            "landmark_knots": path.landmark_knots,
         },
-        "summary": plan.summary(),
-        "warnings": list(plan.warnings),
+        "summary": dict(summary),
+        "warnings": list(warnings),
     }
 
 
-def report_markdown(plan: Plan, figures: Sequence[str]) -> str:
+def report_markdown(
+    setup: Setup,
+    summary: Mapping[str, Any],
+    timings: Mapping[str, float],
+    verification: VerificationReport,
+    warnings: Sequence[str],
+    figures: Sequence[str],
+) -> str:
     """report.md: what was solved, the key numbers, the verification and the figures."""
-    s = plan.summary()
-    t = plan.timings
+    s, t = summary, timings
     lines = [
-        f"# optlight plan: {plan.problem.name}",
+        f"# optlight plan: {setup.problem.name}",
         "",
-        plan.problem.description,
+        setup.problem.description,
         "",
         "Open `preview.html` in a browser for the 3-D preview (robot, object, light sphere, landmarks,",
         "path, camera; the trajectory plays as an animation).",
@@ -116,59 +140,77 @@ def report_markdown(plan: Plan, figures: Sequence[str]) -> str:
         "## Verification",
         "",
         "```",
-        plan.verification.summary(),
+        verification.summary(),
         "```",
         "",
     ]
-    if plan.warnings:
-        lines += ["## Warnings", "", *(f"- {w}" for w in plan.warnings), ""]
+    if warnings:
+        lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
 
 
-def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
-    """Write the results folder of a verified plan (see the module docstring); returns the paths."""
-    robot = plan.robot
-    spec = plan.problem.robot
-    timed = plan.trajectory.sample(plan.trajectory.sample_times(20.0))[0]
+def save_results(
+    folder: str | Path,
+    *,
+    setup: Setup,
+    landmarks: LandmarkSet,
+    visited: Sequence[Landmark],
+    landmark_thetas: Array,
+    path: LightPath,
+    nlp: TrajectoryNLPResult,
+    trajectory: Trajectory,
+    verification: VerificationReport,
+    summary: Mapping[str, Any],
+    timings: Mapping[str, float],
+    warnings: Sequence[str],
+    light_directions_camera: Array,
+    preview: Callable[[Path], Path] | None = None,
+    overwrite: bool = False,
+) -> list[Path]:
+    """Write the results folder of a verified plan (see the module docstring); returns the paths.
+    ``preview(path)`` writes ``preview.html`` (left out when None)."""
+    robot, limits = setup.robot, setup.limits
+    timed = trajectory.sample(trajectory.sample_times(20.0))[0]
     figures = {
         "trajectory": trajectory_figure(
-            plan.trajectory,
-            lower=robot.lower,
-            upper=robot.upper,
-            velocity_limit=robot.velocity_limit * spec.velocity_scale,
-            acceleration_limit=robot.acceleration_limit,
+            trajectory,
+            lower=limits.lower,
+            upper=limits.upper,
+            velocity_limit=limits.velocity,
+            acceleration_limit=limits.acceleration,
         ),
         "path": path_figure(
-            plan.scene.sphere,
-            plan.path.positions,
+            setup.sphere,
+            path.positions,
             np.array([robot.light_pose(q)[0] for q in timed]),
-            np.array([lm.position for lm in plan.visited]),
+            np.array([lm.position for lm in visited]),
         ),
     }
 
     def landmark_figures(folder: Path) -> list[Path]:
-        return save_landmark_figures(plan.landmarks, plan.scene, folder)
+        return save_landmark_figures(landmarks, setup.scene, folder)
 
     def preview_html(folder: Path) -> list[Path]:
-        return [plan.preview().save_html(folder / "preview.html")]
+        assert preview is not None
+        return [preview(folder / "preview.html")]
 
     def report(folder: Path) -> list[Path]:
         names = sorted(p.name for p in folder.glob("*.png"))
-        path = folder / "report.md"
-        path.write_text(report_markdown(plan, names))
-        return [path]
+        out = folder / "report.md"
+        out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
+        return [out]
 
-    writers = [landmark_figures, *([preview_html] if preview else []), report]
+    writers = [landmark_figures, *([preview_html] if preview is not None else []), report]
     return write_results(
         folder,
-        trajectory=plan.trajectory,
-        report=plan.verification,
-        plan_dict=plan_dict(plan),
+        trajectory=trajectory,
+        report=verification,
+        plan_dict=plan_dict(setup, landmarks, visited, landmark_thetas, path, nlp, summary, warnings),
         joint_names=robot.joint_names,
-        light_directions_camera=plan.light_directions_camera,
-        image_pattern=plan.problem.trajectory.image_pattern,
+        light_directions_camera=light_directions_camera,
+        image_pattern=setup.trajectory_spec.image_pattern,
         figures=figures,
         writers=writers,
         overwrite=overwrite,

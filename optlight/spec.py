@@ -29,8 +29,9 @@ Vec3 = tuple[float, float, float]
 #: Robots that load by name (example-robot-data); :mod:`optlight.robot.loading` has their details.
 ROBOT_NAMES: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
 
-#: Folder of the built-in problem files (the repository's ``problems/``).
-PROBLEMS_DIR = Path(__file__).resolve().parent.parent / "problems"
+#: Folder of the built-in problem files and their data, shipped inside the package (the
+#: repository's top-level ``problems/`` points here).
+PROBLEMS_DIR = Path(__file__).resolve().parent / "problems"
 
 
 def key(
@@ -554,7 +555,10 @@ def _check_range(x: float, meta: Any, where: str, file: str) -> None:
 
 
 def _check_consistency(p: Problem, file: str) -> None:
-    """Checks that involve several keys: zenith range, camera placement, per-kind requirements."""
+    """Checks that involve several keys: zenith range, camera placement, per-kind requirements.
+
+    Checks that need a built object (the camera sees the object, the obstacles' geometry) run where
+    it is built (:class:`optlight.setup.Setup`), with the same :class:`ProblemError`."""
     ls, cam, obj = p.light_sphere, p.camera, p.object
     if ls.zenith_min_deg >= ls.zenith_max_deg:
         raise ProblemError(
@@ -578,13 +582,6 @@ def _check_consistency(p: Problem, file: str) -> None:
     if np.linalg.norm(forward) < 1e-9:
         raise ProblemError(
             file, "camera.look_at_m", "a point different from the camera position", list(target)
-        )
-    from optlight.scene.camera import Camera  # local: the scene depends on this module
-
-    u, v, depth = Camera.from_spec(cam, centre).project(centre[None, :])
-    if depth[0] <= 0 or not (0 <= u[0] < cam.width and 0 <= v[0] < cam.height):
-        raise ProblemError(
-            file, "camera.look_at_m", "a camera that sees the object centre inside its image", list(target)
         )
     if obj.kind == "mesh" and obj.path is None:
         raise ProblemError(file, "object.path", "a mesh file path (object.kind = 'mesh')")
@@ -630,46 +627,6 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
-    if p.environment.enabled:
-        _check_environment(p, file)
-
-
-def _check_environment(p: Problem, file: str) -> None:
-    """Obstacle names unique and not reserved, no obstacle holding O or the camera centre, the table
-    below both, the camera above the floor its stand ends on."""
-    from optlight.environment import RESERVED_NAMES, listed_obstacles  # local: it depends on this module
-
-    env = p.environment
-    seen: set[str] = set()
-    center = np.asarray(p.object.center_m, float)
-    eye = np.asarray(p.camera.position_m, float)
-    for where, obstacle in listed_obstacles(env):
-        if obstacle.name in RESERVED_NAMES or obstacle.name in seen:
-            raise ProblemError(
-                file,
-                f"{where}.name",
-                f"a name no other obstacle has (reserved: {', '.join(RESERVED_NAMES)})",
-                obstacle.name,
-            )
-        seen.add(obstacle.name)
-        for point, what in ((center, "the object centre"), (eye, "the camera centre")):
-            if obstacle.signed_distance(point)[0] <= 0.0:
-                raise ProblemError(file, where, f"an obstacle that does not contain {what} {list(point)}")
-    floor = env.table_height_m
-    if floor is not None and center[2] <= floor:
-        raise ProblemError(
-            file,
-            "environment.table_height_m",
-            f"a table below the object centre (z = {center[2]:g} m)",
-            floor,
-        )
-    if env.camera_body and eye[2] <= (floor if floor is not None else 0.0):
-        raise ProblemError(
-            file,
-            "camera.position_m",
-            "a camera above the table (or above z = 0 without a table), where its stand ends",
-            list(p.camera.position_m),
-        )
 
 
 def _to_plain(value: Any) -> Any:

@@ -37,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import VerificationError
 from optlight.geometry import LightSphere, h_residual
+from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
 
 Array = NDArray[np.float64]
@@ -142,8 +143,8 @@ class VerificationReport:
             "tolerances": asdict(self.tolerances),
             "skipped": list(self.skipped),
             "counts": self.counts,
-            "checks": {k: {**_finite_or_none(asdict(c)), "passed": c.passed} for k, c in self.checks.items()},
-            "violations": [_finite_or_none(asdict(v)) for v in self.violations],
+            "checks": {k: {**json_safe(c), "passed": c.passed} for k, c in self.checks.items()},
+            "violations": json_safe(self.violations),
         }
 
     def summary(self) -> str:
@@ -408,10 +409,6 @@ def _runs(bad: NDArray[np.bool_], index: NDArray[np.intp] | None = None) -> list
     starts = np.flatnonzero(bad & ~np.concatenate([[False], link]))
     stops = np.flatnonzero(bad & ~np.concatenate([link, [False]])) + 1
     return list(zip(starts.tolist(), stops.tolist(), strict=True))
-
-
-def _finite_or_none(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in d.items()}
 
 
 class _Collector:

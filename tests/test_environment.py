@@ -312,5 +312,5 @@ def test_inconsistent_environments_name_the_key(change: dict, key: str) -> None:
     data = load_problem("table_wall").to_dict()
     data["environment"] = {"enabled": True, **change}
     with pytest.raises(ProblemError) as err:
-        problem_from_dict(data)
+        Environment.from_problem(problem_from_dict(data))  # the layout is checked where it is built
     assert err.value.key == key

@@ -12,17 +12,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import reduced_problem
 
 import optlight
 from optlight.environment import LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
-from optlight.pipeline import place_landmarks
 from optlight.planning.landmarks import Landmark
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
+from optlight.planning.policy import place_landmarks
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.robot import Robot, generalized_ik
-from optlight.scene import Scene
-from optlight.spec import Problem, load_problem, problem_from_dict
+from optlight.setup import Setup
+from optlight.spec import Problem
 from optlight.verify import ENVIRONMENT_CHECKS, CheckResult, VerificationReport, verify_trajectory
 
 #: Landmarks of the reduced collision problem (its file has 12).
@@ -31,14 +32,9 @@ COLLISION_LANDMARKS = 8
 
 def reduced(name: str, landmarks: int | None = None, **sections: dict) -> Problem:
     """A built-in problem with a 96² camera (and ``landmarks`` landmarks), sections updated."""
-    original = load_problem(name)
-    data = original.to_dict()
-    data["camera"].update(width=96, height=96)
     if landmarks is not None:
-        data["landmarks"].update(count=landmarks)
-    for section, values in sections.items():
-        data[section].update(values)
-    return problem_from_dict(data, source=original.source)
+        sections["landmarks"] = {**sections.get("landmarks", {}), "count": landmarks}
+    return reduced_problem(name, camera_px=96, **sections)
 
 
 def solve_quietly(problem: Problem) -> optlight.Plan:
@@ -206,18 +202,17 @@ def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     environment's rows one for the best light on that azimuth. At 157.5° (the far side of the cap,
     where the arm only reaches over the view cone) no light of the azimuth has a clear arm: the
     landmark is named, with the row that blocks it."""
-    problem = reduced("table_wall")
-    robot = optlight.load_robot(problem)
-    scene = Scene.from_problem(problem)
-    env = Environment.from_problem(problem)
-    placement = LightPlacement(problem, scene, robot, environment=env)
+    setup = Setup.from_problem(reduced("table_wall"))
+    robot, scene, env = setup.robot, setup.scene, setup.environment
+    assert env is not None
+    placement = LightPlacement(setup)
     assert placement.environment is env
 
     ik = generalized_ik(robot, scene.sphere, (math.radians(30.0), 0.0), robot.theta_ref)
     row, label = env.worst_sphere_row(robot, ik.theta)
     assert ik.success and row < -0.02 and label.endswith("↔ wall")
     light = scene.sphere.position(math.radians(30.0), 0.0)
-    found = ClearPosture(problem, robot, env).solve(light, ik.theta)
+    found = ClearPosture(setup, env).solve(light, ik.theta)
     assert found is not None
     theta, row, label = found
     assert row >= -CLEARANCE_TOL and env.worst_sphere_row(robot, theta) == (row, label)
@@ -233,7 +228,7 @@ def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     zenith = math.radians(30.0)
     blocked = Landmark(0, zenith, azimuth, scene.sphere.position(zenith, azimuth), 0.0, "refined", "", 0, 0.0)
     with pytest.raises(UnreachableError, match="blocked for panda") as error:
-        place_landmarks(problem, robot, scene.sphere, [blocked], scene=scene, environment=env)
+        place_landmarks(setup, [blocked])
     message = str(error.value)
     assert "azimuth 157.5°" in message and f"↔ {VIEW_CONE}" in message
     assert "nor is any light on its azimuth clear of the environment" in message

@@ -3,22 +3,22 @@ landmarks, never worse than the sweep, NLP built once, free mode keeps its separ
 
 from __future__ import annotations
 
-import copy
 import math
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import reduced_problem
 
 from optlight.errors import ProblemError
 from optlight.objectives import Objective
 from optlight.planning import landmarks as lm_module
-from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima, search_scene, zenith_grid
+from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima, zenith_grid
 from optlight.scene import Scene
-from optlight.spec import PROBLEMS_DIR, Problem, problem_from_dict
+from optlight.setup import Setup
+from optlight.spec import Problem
 from optlight.viz.figures import save_landmark_figures
 
 REF_ZENITH_DEG = 11.3  # off the sweep grid, so only the refinement can land on it
@@ -26,13 +26,12 @@ REF_ZENITH_DEG = 11.3  # off the sweep grid, so only the refinement can land on 
 
 def small_problem(**landmarks: Any) -> Problem:
     """The default face at 64×64 px, searched at 40 px, reference light off the sweep grid."""
-    with (PROBLEMS_DIR / "default.toml").open("rb") as f:
-        data = copy.deepcopy(tomllib.load(f))
-    data["camera"].update(width=64, height=64)
-    data["object"]["face"] = {"resolution": 64}
-    data["objective"]["reference"].update(zenith_deg=REF_ZENITH_DEG, azimuth_deg=0.0)
-    data["landmarks"].update({"count": 8, "resolution": 40, **landmarks})
-    return problem_from_dict(data)
+    return reduced_problem(
+        camera_px=64,
+        object={"face": {"resolution": 64}},
+        objective={"reference": {"kind": "light", "zenith_deg": REF_ZENITH_DEG, "azimuth_deg": 0.0}},
+        landmarks={"count": 8, "resolution": 40, **landmarks},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -41,13 +40,18 @@ def problem() -> Problem:
 
 
 @pytest.fixture(scope="module")
-def scene(problem: Problem) -> Scene:
-    return Scene.from_problem(problem)
+def setup(problem: Problem) -> Setup:
+    return Setup.from_problem(problem)
 
 
 @pytest.fixture(scope="module")
-def result(problem: Problem, scene: Scene) -> lm_module.LandmarkSet:
-    return find_landmarks(problem, scene)
+def scene(setup: Setup) -> Scene:
+    return setup.scene
+
+
+@pytest.fixture(scope="module")
+def result(setup: Setup) -> lm_module.LandmarkSet:
+    return find_landmarks(setup)
 
 
 def test_distance_vanishes_at_the_reference_light(problem: Problem, scene: Scene) -> None:
@@ -99,7 +103,7 @@ def test_nlp_built_once_and_progress_reported(problem: Problem, scene: Scene, mo
     monkeypatch.setattr(lm_module.ca, "nlpsol", counting)
     calls: list[tuple[int, int]] = []
     small = small_problem(count=3, seeds=2)
-    out = find_landmarks(small, scene, progress=lambda done, total: calls.append((done, total)))
+    out = find_landmarks(Setup.from_problem(small), progress=lambda done, total: calls.append((done, total)))
     assert built == ["zenith_refiner"]
     assert calls == [(1, 3), (2, 3), (3, 3)]
     assert out.iterations > 0
@@ -107,7 +111,7 @@ def test_nlp_built_once_and_progress_reported(problem: Problem, scene: Scene, mo
 
 def test_free_mode_keeps_the_separation(scene: Scene) -> None:
     free = small_problem(mode="free", count=4, min_separation_deg=8.0, sweep_step_deg=6.0, resolution=32)
-    out = find_landmarks(free, Scene.from_problem(free))
+    out = find_landmarks(Setup.from_problem(free))
     assert len(out) == 4
     d = (out.positions - scene.sphere.center) / scene.sphere.radius
     angles = np.degrees(np.arccos(np.clip(d @ d.T, -1, 1)))
@@ -121,7 +125,7 @@ def test_free_mode_keeps_the_separation(scene: Scene) -> None:
 def test_free_mode_too_many_landmarks_is_a_problem_error() -> None:
     crowded = small_problem(mode="free", count=6, min_separation_deg=60.0, sweep_step_deg=10.0, resolution=24)
     with pytest.raises(ProblemError, match="landmarks.count"):
-        find_landmarks(crowded)
+        find_landmarks(Setup.from_problem(crowded))
 
 
 def test_helpers() -> None:
@@ -132,10 +136,12 @@ def test_helpers() -> None:
     assert np.diff(grid).max() <= math.radians(7.0) + 1e-12
 
 
-def test_search_scene_keeps_the_aspect(problem: Problem, scene: Scene) -> None:
-    low = search_scene(problem, scene)
+def test_search_scene_keeps_the_aspect(setup: Setup) -> None:
+    low = setup.search_scene
     assert (low.camera.width, low.camera.height) == (40, 40)
-    assert search_scene(small_problem(resolution=64), scene) is scene
+    assert low.object is setup.scene.object  # one object, two resolutions
+    same = Setup.from_problem(small_problem(resolution=64))
+    assert same.search_scene is same.scene and same.search_objective is same.objective
 
 
 def test_landmark_figures(result: lm_module.LandmarkSet, scene: Scene, tmp_path: Path) -> None:

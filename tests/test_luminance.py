@@ -27,9 +27,8 @@ def evaluate(f: ca.Function, a: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def cosine(scene: Scene, a: np.ndarray) -> np.ndarray:
-    return cosine_and_falloff(scene.gbuffer, a, scene.light.model, scene.sphere.center, scene.sphere.radius)[
-        0
-    ]
+    gb = scene.gbuffer
+    return cosine_and_falloff(gb.points, gb.normals, a, scene.light.model, scene.sphere.center, scene.sphere.radius)[0]
 
 
 def test_function_signature(scene: Scene) -> None:

@@ -3,14 +3,13 @@ the soft histogram against hand-computed bins, references from images (PNG, NPY)
 
 from __future__ import annotations
 
-import copy
 import math
-import tomllib
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import reduced_problem
 
 from optlight.errors import OptlightError, ProblemError
 from optlight.objectives import (
@@ -28,7 +27,7 @@ from optlight.objectives import (
     reference_from_pixels,
 )
 from optlight.scene import Scene
-from optlight.spec import PROBLEMS_DIR, Problem, problem_from_dict
+from optlight.spec import Problem, problem_from_dict
 
 P = 40
 HIST = SoftHistogram(bins=8, sigma_bins=1.0)
@@ -180,10 +179,7 @@ def test_read_image_png_npy_and_errors(tmp_path: Path) -> None:
 def face_problem(tmp_path: Path, reference: dict, terms: list[dict] | None = None) -> Problem:
     """The default face at 48×48 px with the given [objective.reference] (and terms), written to
     ``tmp_path`` so that relative image paths resolve there."""
-    with (PROBLEMS_DIR / "default.toml").open("rb") as f:
-        data = copy.deepcopy(tomllib.load(f))
-    data["camera"].update(width=48, height=48)
-    data["object"]["face"] = {"resolution": 48}
+    data = reduced_problem(camera_px=48, object={"face": {"resolution": 48}}).to_dict()
     data["objective"]["reference"] = reference
     if terms is not None:
         data["objective"]["terms"] = terms

@@ -9,24 +9,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import reduced_problem
 
 import optlight
 from optlight.errors import UnreachableError, VerificationError
 from optlight.geometry import h_residual
-from optlight.pipeline import joint_path_length
+from optlight.plan import joint_path_length
 from optlight.planning.timing import Trajectory
-from optlight.spec import load_problem, problem_from_dict
 from optlight.verify import verify_trajectory
 
 
 def small_problem(**overrides: dict) -> optlight.Problem:
     """The default problem with 8 landmarks and a 96² camera, so the whole pipeline runs in seconds."""
-    data = load_problem("default").to_dict()
-    data["camera"].update(width=96, height=96)
-    data["landmarks"].update(count=8)
-    for section, values in overrides.items():
-        data[section].update(values)
-    return problem_from_dict(data, source=load_problem("default").source)
+    landmarks = {"count": 8, **overrides.pop("landmarks", {})}
+    return reduced_problem(camera_px=96, landmarks=landmarks, **overrides)
 
 
 @pytest.fixture(scope="module")

@@ -11,17 +11,18 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
+from conftest import reduced_problem
 
 import optlight
 from optlight.errors import UnreachableError
 from optlight.geometry import h_residual
-from optlight.pipeline import place_landmarks
 from optlight.planning import placement as placement_module
 from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
 from optlight.planning.placement import LightPlacement, PlacementResult
-from optlight.robot import Robot, generalized_ik, load_robot
-from optlight.scene import Scene
-from optlight.spec import Problem, load_problem, problem_from_dict
+from optlight.planning.policy import place_landmarks
+from optlight.robot import Robot, generalized_ik
+from optlight.setup import Setup
+from optlight.spec import Problem
 
 #: A base 0.9 m below the light ring, on the camera side, found by probing with the IK: the light
 #: reaches every azimuth near the pole, but not the 45° and 135° landmarks (zenith 7.6°) of the 8.
@@ -31,38 +32,34 @@ LOW_BASE = [-0.603, -0.55, -0.45]
 def small_problem(count: int = 8, **sections: dict[str, Any]) -> Problem:
     """The default problem with a 64² camera searched at its own resolution (so the placement NLP and
     the landmark search share one model) and ``count`` landmarks."""
-    default = load_problem("default")
-    data = default.to_dict()
-    data["camera"].update(width=64, height=64)
-    data["landmarks"].update(count=count, resolution=64)
-    for section, values in sections.items():
-        data[section].update(values)
-    return problem_from_dict(data, source=default.source)
+    landmarks = {"count": count, "resolution": 64, **sections.pop("landmarks", {})}
+    return reduced_problem(camera_px=64, landmarks=landmarks, **sections)
 
 
-class Setup:
-    """A problem with its scene, robot, landmarks and placement NLP."""
+class Case:
+    """A problem built once, with its landmarks and placement NLP."""
 
     def __init__(self, problem: Problem) -> None:
         self.problem = problem
-        self.scene = Scene.from_problem(problem)
-        self.sphere = self.scene.sphere
-        self.robot: Robot = load_robot(problem)
-        self.landmarks: LandmarkSet = find_landmarks(problem, self.scene)
-        self.placement = LightPlacement(problem, self.scene, self.robot)
+        self.setup = Setup.from_problem(problem)
+        self.scene = self.setup.scene
+        self.sphere = self.setup.sphere
+        self.robot: Robot = self.setup.robot
+        self.landmarks: LandmarkSet = find_landmarks(self.setup)
+        self.placement = LightPlacement(self.setup)
 
 
 @pytest.fixture(scope="module")
-def default() -> Setup:
-    return Setup(small_problem())
+def default() -> Case:
+    return Case(small_problem())
 
 
 @pytest.fixture(scope="module")
-def low() -> Setup:
-    return Setup(small_problem(robot={"base_position_m": LOW_BASE}))
+def low() -> Case:
+    return Case(small_problem(robot={"base_position_m": LOW_BASE}))
 
 
-def assert_feasible(setup: Setup, result: PlacementResult, azimuth: float | None) -> None:
+def assert_feasible(setup: Case, result: PlacementResult, azimuth: float | None) -> None:
     """h = 0 by pinocchio (not the CasADi mirror the NLP used), the azimuth half-plane, the zenith
     range and the joint limits, and the reported position, angles and cost."""
     robot, sphere = setup.robot, setup.sphere
@@ -85,7 +82,7 @@ def assert_feasible(setup: Setup, result: PlacementResult, azimuth: float | None
 
 
 @pytest.mark.parametrize("offset_deg", [0.0, 3.0])
-def test_reachable_landmarks_are_reproduced(default: Setup, offset_deg: float) -> None:
+def test_reachable_landmarks_are_reproduced(default: Case, offset_deg: float) -> None:
     """Warm-started at the IK solution of the landmark (or of a light 3° farther from the pole), the NLP
     on the landmark's azimuth returns to the landmark."""
     for lm in default.landmarks.landmarks:
@@ -103,7 +100,7 @@ def test_reachable_landmarks_are_reproduced(default: Setup, offset_deg: float) -
         assert 0 < result.iterations < 60
 
 
-def test_free_azimuth_finds_the_reference_light(default: Setup) -> None:
+def test_free_azimuth_finds_the_reference_light(default: Case) -> None:
     """With the azimuth free the NLP descends to the reference light (10° zenith) or its mirror image
     (the face is mirror-symmetric), where the cost vanishes."""
     result = default.placement.solve(None, default.robot.theta_ref)
@@ -115,7 +112,7 @@ def test_free_azimuth_finds_the_reference_light(default: Setup) -> None:
     )
 
 
-def test_nlp_built_once(default: Setup, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_nlp_built_once(default: Case, monkeypatch: pytest.MonkeyPatch) -> None:
     built: list[str] = []
     real = ca.nlpsol
 
@@ -124,7 +121,7 @@ def test_nlp_built_once(default: Setup, monkeypatch: pytest.MonkeyPatch) -> None
         return real(*args, **kwargs)
 
     monkeypatch.setattr(placement_module.ca, "nlpsol", counting)
-    placement = LightPlacement(default.problem, default.scene, default.robot)
+    placement = LightPlacement(default.setup)
     theta = default.robot.theta_ref
     for azimuth in (0.0, math.pi / 2, None, 3 * math.pi / 2):
         result = placement.solve(azimuth, theta)
@@ -135,12 +132,12 @@ def test_nlp_built_once(default: Setup, monkeypatch: pytest.MonkeyPatch) -> None
 
 def test_search_resolution_is_the_landmark_search_one() -> None:
     problem = small_problem(count=1, landmarks={"resolution": 40})
-    placement = LightPlacement(problem, Scene.from_problem(problem), load_robot(problem))
+    placement = LightPlacement(Setup.from_problem(problem))
     assert (placement.search.camera.width, placement.search.camera.height) == (40, 40)
     assert (placement.scene.camera.width, placement.scene.camera.height) == (64, 64)
 
 
-def test_cost_gradient_matches_finite_differences(default: Setup) -> None:
+def test_cost_gradient_matches_finite_differences(default: Case) -> None:
     robot, placement = default.robot, default.placement
     rng = np.random.default_rng(7)
     theta = robot.random_configuration(rng)
@@ -167,7 +164,7 @@ def test_cost_gradient_matches_finite_differences(default: Setup) -> None:
     np.testing.assert_allclose(analytic, numeric, rtol=1e-5, atol=1e-6 * np.abs(analytic).max())
 
 
-def test_out_of_reach_optimum_is_kept_off_the_reach_boundary(low: Setup) -> None:
+def test_out_of_reach_optimum_is_kept_off_the_reach_boundary(low: Case) -> None:
     """The landmark at 45° is out of reach: the NLP's optimum lies on the reach boundary, where the light
     task is singular, and the light ends 0.1° inside it, non-singular and cheaper than any reachable light
     nearer the pole."""
@@ -188,14 +185,15 @@ def test_out_of_reach_optimum_is_kept_off_the_reach_boundary(low: Setup) -> None
     assert result.cost < min(nearer)
 
 
-def test_unreachable_landmark_moves_along_its_azimuth(low: Setup) -> None:
+def test_unreachable_landmark_moves_along_its_azimuth(low: Case) -> None:
     robot, sphere, landmarks = low.robot, low.sphere, low.landmarks.landmarks
     moved = [1, 3]
     for j in moved:  # the landmark is out of reach, the light at half its zenith is not
         lm = landmarks[j]
         assert not generalized_ik(robot, sphere, lm.position, robot.theta_ref).success
         assert generalized_ik(robot, sphere, (lm.zenith / 2, lm.azimuth), robot.theta_ref).success
-    kept, thetas, notes = place_landmarks(low.problem, robot, sphere, landmarks, scene=low.scene)
+    placed = place_landmarks(low.setup, landmarks)
+    kept, thetas, notes = placed.landmarks, placed.thetas, placed.warnings
     assert [lm.index for lm in kept] == list(range(len(landmarks)))
     assert [lm.index for lm in kept if lm.status == "placed"] == moved
     assert len(notes) == len(moved)
@@ -223,7 +221,7 @@ def test_unreachable_landmark_moves_along_its_azimuth(low: Setup) -> None:
         assert robot.within_limits(theta, tol=0.0)
 
 
-def test_the_pipeline_plans_through_moved_landmarks(low: Setup) -> None:
+def test_the_pipeline_plans_through_moved_landmarks(low: Case) -> None:
     """The whole job with the low base: the two landmarks out of reach are moved, the trajectory NLP pins
     them (kept off the singular reach boundary, where it failed) and the plan passes verification."""
     with warnings.catch_warnings(record=True) as caught:
@@ -237,24 +235,25 @@ def test_the_pipeline_plans_through_moved_landmarks(low: Setup) -> None:
 
 def test_azimuth_out_of_reach_is_named_or_dropped() -> None:
     """From 20° zenith up, the low base reaches only the 270° azimuth of four."""
-    setup = Setup(
+    case = Case(
         small_problem(count=4, robot={"base_position_m": LOW_BASE}, light_sphere={"zenith_min_deg": 20.0})
     )
-    args = (setup.problem, setup.robot, setup.sphere, setup.landmarks.landmarks)
+    landmarks = case.landmarks.landmarks
     with pytest.raises(
         UnreachableError,
         match=r"landmark 0 \(zenith 20\.0°, azimuth 0\.0°\) is out of reach of panda: .*; nor is any light "
         r"on its azimuth within zenith 20\.0–60\.0° \(placement NLP: ",
     ):
-        place_landmarks(*args)  # the placement NLP builds its own scene
+        place_landmarks(case.setup, landmarks)
     partial = small_problem(
         count=4,
         robot={"base_position_m": LOW_BASE},
         light_sphere={"zenith_min_deg": 20.0},
         landmarks={"allow_partial": True},
     )
-    kept, thetas, notes = place_landmarks(partial, *args[1:], scene=setup.scene)
-    assert [lm.index for lm in kept] == [3] and thetas.shape == (1, setup.robot.n)
+    placed = place_landmarks(Setup.from_problem(partial), landmarks)
+    kept, thetas, notes = placed.landmarks, placed.thetas, placed.warnings
+    assert [lm.index for lm in kept] == [3] and thetas.shape == (1, case.robot.n)
     assert [note.split(" (")[0] for note in notes] == [
         "dropped landmark 0",
         "dropped landmark 1",

@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from optlight.environment import Environment
 from optlight.geometry import LightSphere
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
-from optlight.robot import load_robot, reachability_map
+from optlight.planning.reach import reachability_map
+from optlight.robot import load_robot
+from optlight.setup import Setup
 from optlight.spec import load_problem, problem_from_dict
 
 
 def test_default_problem_cap_is_fully_reachable_by_the_panda(tmp_path: Path) -> None:
     problem = load_problem("default")
-    reach = reachability_map(problem, zenith_step_deg=10.0, azimuth_step_deg=30.0)
+    reach = reachability_map(Setup.from_problem(problem), zenith_step_deg=10.0, azimuth_step_deg=30.0)
     assert reach.zenith.shape == (7,) and reach.azimuth.shape == (12,)
     assert np.isclose(np.rad2deg(reach.zenith[-1]), problem.light_sphere.zenith_max_deg)
     assert reach.success.all() and reach.reachable_fraction == 1.0 and reach.unreachable == []
@@ -51,7 +53,7 @@ def test_unreachable_cells_are_reported(tmp_path: Path) -> None:
             "solver": {"ik_max_iter": 60},
         }
     )
-    reach = reachability_map(problem, zenith_step_deg=30.0, azimuth_step_deg=60.0)
+    reach = reachability_map(Setup.from_problem(problem), zenith_step_deg=30.0, azimuth_step_deg=60.0)
     assert 0.0 < reach.reachable_fraction < 1.0
     failed = ~reach.success
     assert np.isnan(reach.manipulability[failed]).all() and np.isnan(reach.theta[failed]).all()
@@ -66,12 +68,10 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
     """table_wall: the arm reaches the far side of the cap only over the camera's view cone. Every
     cell stays reachable by the IK; the taken ones have no clear joint angles, the others have them."""
     problem = load_problem("table_wall")
-    robot = load_robot(problem)
-    env = Environment.from_problem(problem)
-    sphere = LightSphere.from_problem(problem)
-    reach = reachability_map(
-        problem, zenith_step_deg=6.0, azimuth_step_deg=30.0, robot=robot, environment=env
-    )
+    setup = Setup.from_problem(problem)
+    robot, env, sphere = setup.robot, setup.environment, setup.sphere
+    assert env is not None
+    reach = reachability_map(setup, zenith_step_deg=6.0, azimuth_step_deg=30.0)
     assert reach.environment and reach.success.all()
     assert reach.taken.any() and reach.clear.any()
     assert 0.0 < reach.taken_fraction < 0.5 and reach.clear_fraction == 1.0 - reach.taken_fraction
@@ -87,7 +87,9 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
         assert np.linalg.norm(light - target) <= max(reach.residual[i, j], POSE_TOL) + 1e-12
 
     free = problem_from_dict({**problem.to_dict(), "environment": {"enabled": False}}, source=problem.source)
-    without = reachability_map(free, zenith_step_deg=6.0, azimuth_step_deg=30.0, robot=robot)
+    without = reachability_map(
+        dataclasses.replace(setup, problem=free, environment=None), zenith_step_deg=6.0, azimuth_step_deg=30.0
+    )
     assert not without.environment and not without.taken.any() and np.isnan(without.clearance).all()
     np.testing.assert_array_equal(without.success, reach.success)  # the IK part does not change
 

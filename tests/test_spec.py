@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from optlight.errors import ProblemError
+from optlight.setup import Setup
 from optlight.spec import (
     PROBLEMS_DIR,
     available_problems,
@@ -94,7 +95,7 @@ def test_bad_values_name_file_and_key(tmp_path: Path, mutate, key: str, fragment
     mutate(data)
     path = write_toml(tmp_path / "bad.toml", data)
     with pytest.raises(ProblemError) as err:
-        load_problem(path)
+        Setup.from_problem(path)  # loading checks the file, building what needs the built scene
     message = str(err.value)
     assert err.value.key == key
     assert str(path) in message and key in message and fragment in message

@@ -6,25 +6,23 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from optlight.geometry import LightSphere, h_residual
-from optlight.pipeline import joint_path_length, knot_ik
+from optlight.geometry import h_residual
+from optlight.plan import joint_path_length
 from optlight.planning.path import build_path
+from optlight.planning.policy import knot_ik
 from optlight.planning.trajectory import TrajectoryOptimizer
-from optlight.robot import generalized_ik, load_robot
-from optlight.spec import load_problem
-
-PROBLEM = load_problem("default")
+from optlight.robot import generalized_ik
+from optlight.setup import Setup
 
 
 @pytest.fixture(scope="module")
-def setup():
-    robot = load_robot(PROBLEM)
-    sphere = LightSphere.from_problem(PROBLEM)
+def setup(small_setup: Setup):
+    robot, sphere = small_setup.robot, small_setup.sphere
     zen = np.deg2rad([10, 25, 40, 25, 15])
     az = np.deg2rad([0, 60, 120, 200, 300])
     path = build_path(sphere, sphere.position(zen, az), np.arange(5), np.deg2rad(3.0))
     start = generalized_ik(robot, sphere, path.positions[0]).theta
-    warm, failures = knot_ik(PROBLEM, robot, sphere, path, start)
+    warm, failures = knot_ik(small_setup, path, start)
     assert failures == 0
     return robot, sphere, path, warm
 

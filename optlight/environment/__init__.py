@@ -29,6 +29,7 @@ to z = 0, "camera_stand"), and the boxes, cylinders and spheres listed. The view
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
@@ -53,8 +54,11 @@ from optlight.environment.shapes import (
     rotation_rpy_deg,
 )
 from optlight.environment.spheres import RobotSpheres, fit_spheres
+from optlight.errors import ProblemError
 from optlight.robot.kinematics import symbolic_frame_pose
 from optlight.robot.loading import Robot
+from optlight.scene.camera import Camera
+from optlight.scene.objects import build_object
 from optlight.spec import EnvironmentSpec, Problem
 
 Array = NDArray[np.float64]
@@ -102,6 +106,44 @@ def listed_obstacles(spec: EnvironmentSpec) -> list[tuple[str, Obstacle]]:
     return out
 
 
+def _check_layout(p: Problem) -> None:
+    """Obstacle names unique and not reserved, no obstacle holding O or the camera centre, the table
+    below both, the camera above the floor its stand ends on: a :class:`ProblemError` naming the key
+    otherwise."""
+    file = str(p.source) if p.source else "<inline>"
+    env = p.environment
+    seen: set[str] = set()
+    center = np.asarray(p.object.center_m, float)
+    eye = np.asarray(p.camera.position_m, float)
+    for where, obstacle in listed_obstacles(env):
+        if obstacle.name in RESERVED_NAMES or obstacle.name in seen:
+            raise ProblemError(
+                file,
+                f"{where}.name",
+                f"a name no other obstacle has (reserved: {', '.join(RESERVED_NAMES)})",
+                obstacle.name,
+            )
+        seen.add(obstacle.name)
+        for point, what in ((center, "the object centre"), (eye, "the camera centre")):
+            if obstacle.signed_distance(point)[0] <= 0.0:
+                raise ProblemError(file, where, f"an obstacle that does not contain {what} {point.tolist()}")
+    floor = env.table_height_m
+    if floor is not None and center[2] <= floor:
+        raise ProblemError(
+            file,
+            "environment.table_height_m",
+            f"a table below the object centre (z = {center[2]:g} m)",
+            floor,
+        )
+    if env.camera_body and eye[2] <= (floor if floor is not None else 0.0):
+        raise ProblemError(
+            file,
+            "camera.position_m",
+            "a camera above the table (or above z = 0 without a table), where its stand ends",
+            list(p.camera.position_m),
+        )
+
+
 class Environment:
     """Obstacles, view cone and margins of a problem (module docstring), independent of the robot;
     the robot-specific models (:class:`CollisionModel`: geometry, pairs, spheres) are built on first
@@ -139,20 +181,22 @@ class Environment:
         self.light_length = float(light_length)
         self.spheres_per_link = int(spheres_per_link)
         self._models: dict[int, CollisionModel] = {}
+        self._functions: dict[tuple[int, str], tuple[Robot, ca.Function]] = {}
 
     @classmethod
-    def from_problem(cls, problem: Problem) -> Environment:
+    def from_problem(cls, problem: Problem, object_vertices: ArrayLike | None = None) -> Environment:
         """The environment of a problem's ``[environment]`` section (built whether or not
-        ``enabled`` is set: the caller decides whether to use it)."""
-        from optlight.scene.camera import Camera
-        from optlight.scene.objects import build_object
-
+        ``enabled`` is set: the caller decides whether to use it). ``object_vertices`` (V, 3), world
+        frame, m: the built object's, for its bounding sphere when ``object_radius_m`` is not set
+        (built from the problem when not given)."""
         spec = problem.environment
         center = np.asarray(problem.object.center_m, float)
+        _check_layout(problem)
         if spec.object_radius_m is not None:
             radius = float(spec.object_radius_m)
         else:
-            radius = float(np.max(np.linalg.norm(build_object(problem).mesh.vertices - center, axis=1)))
+            vertices = build_object(problem).mesh.vertices if object_vertices is None else object_vertices
+            radius = float(np.max(np.linalg.norm(np.asarray(vertices, float) - center, axis=1)))
         obstacles: list[Obstacle] = [Ball("object", center, radius)]
         if spec.table_height_m is not None:
             obstacles.append(HalfSpace("table", np.array([0.0, 0.0, 1.0]), float(spec.table_height_m)))
@@ -234,10 +278,22 @@ class Environment:
         k = int(np.argmin(rows))
         return float(rows[k]), (self.clearance_labels(robot) + self.view_labels(robot))[k]
 
+    def _cached(self, robot: Robot, name: str, build: Callable[[], ca.Function]) -> ca.Function:
+        """The CasADi function ``name`` of ``robot``, built on first use and kept (building the SX
+        graph of every sphere row costs ~0.1–0.5 s, and every NLP asks for it)."""
+        key = (id(robot), name)
+        if key not in self._functions or self._functions[key][0] is not robot:
+            self._functions[key] = (robot, build())
+        return self._functions[key][1]
+
     def clearance_function(self, robot: Robot) -> ca.Function:
         """``casadi.Function("clearance", [theta (n×1)], [c (m×1)])``, m = obstacle rows + self rows
         (:meth:`clearance_labels`): c ≥ 0 means every sphere clears every obstacle by ``margin`` and
-        every self pair by ``self_margin`` (m). SX graph, common subexpressions eliminated."""
+        every self pair by ``self_margin`` (m). SX graph, common subexpressions eliminated; built once
+        per robot."""
+        return self._cached(robot, "clearance", lambda: self._build_clearance(robot))
+
+    def _build_clearance(self, robot: Robot) -> ca.Function:
         cm = self.collision_model(robot)
         theta = ca.SX.sym("theta", robot.n)
         centers = self._symbolic_centers(robot, cm.spheres, theta)
@@ -256,9 +312,13 @@ class Environment:
         """``casadi.Function("view_clearance", [theta (n×1)], [v (m×1)])``: per robot sphere that can
         reach the cone (:attr:`CollisionModel.view_rows`, the light's included), its signed distance to
         the view cone minus its radius (m); v ≥ 0 means out of the camera's view of the object.
-        Raises ValueError when ``view_mode`` is "off"."""
+        Raises ValueError when ``view_mode`` is "off". Built once per robot."""
         if self.view_cone is None:
             raise ValueError("the view cone is off (environment.view_cone = 'off')")
+        return self._cached(robot, "view", lambda: self._build_view(robot))
+
+    def _build_view(self, robot: Robot) -> ca.Function:
+        assert self.view_cone is not None
         cm = self.collision_model(robot)
         theta = ca.SX.sym("theta", robot.n)
         centers = self._symbolic_centers(robot, cm.spheres, theta)

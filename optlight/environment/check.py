@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import coal
@@ -34,6 +34,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.environment.collision import CollisionModel, PairKind
+from optlight.jsondata import json_safe
 
 Array = NDArray[np.float64]
 
@@ -115,20 +116,18 @@ class EnvironmentReport:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-safe data (non-finite numbers become None)."""
-
-        def clean(d: dict[str, Any]) -> dict[str, Any]:
-            return {k: None if isinstance(v, float) and not math.isfinite(v) else v for k, v in d.items()}
-
-        return {
-            "passed": self.passed,
-            "samples": self.samples,
-            "view_samples": self.view_samples,
-            "evaluations": self.evaluations,
-            "elapsed_s": self.elapsed_s,
-            "min_clearance_m": clean({"v": self.min_clearance_m})["v"],
-            "pairs": [{**clean(asdict(p)), "passed": p.passed} for p in self.pairs],
-            "violations": [{**clean(asdict(v)), "point_m": list(v.point_m)} for v in self.violations],
-        }
+        return json_safe(
+            {
+                "passed": self.passed,
+                "samples": self.samples,
+                "view_samples": self.view_samples,
+                "evaluations": self.evaluations,
+                "elapsed_s": self.elapsed_s,
+                "min_clearance_m": self.min_clearance_m,
+                "pairs": [{**json_safe(p), "passed": p.passed} for p in self.pairs],
+                "violations": self.violations,
+            }
+        )
 
     def summary(self) -> str:
         """A readable account: verdict, the closest pair of each kind, the violations."""

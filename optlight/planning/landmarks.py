@@ -51,7 +51,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import casadi as ca
 import numpy as np
@@ -61,8 +61,10 @@ from scipy.optimize import minimize_scalar
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere, direction_in_sphere_frame
 from optlight.objectives import Objective
+from optlight.planning.nlp import Solve, ipopt_options, run, sphere_position
 from optlight.scene import Scene
-from optlight.spec import Problem, SolverSpec
+from optlight.setup import Setup
+from optlight.spec import SolverSpec
 
 Array = NDArray[np.float64]
 Progress = Callable[[int, int], None]
@@ -213,45 +215,6 @@ def local_minima(values: ArrayLike) -> NDArray[np.intp]:
 # --------------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class Solve:
-    """One IPOPT solve: the solution ``x``, IPOPT's iteration count and return status."""
-
-    x: Array
-    iterations: int
-    status: str
-    success: bool
-
-
-def _ipopt_options(solver: SolverSpec) -> dict[str, Any]:
-    """IPOPT settings from ``[solver]``. The Hessian is L-BFGS: on the default face it needed about
-    as many iterations as the exact one (90 against 80 over 10 seeds) at half the time per iteration,
-    the exact Hessian of the P×K histogram graph costing ~2.5 gradients."""
-    return {
-        "ipopt.print_level": 5 if solver.verbose else 0,
-        "ipopt.sb": "yes",
-        "print_time": solver.verbose,
-        "ipopt.max_iter": solver.max_iter,
-        "ipopt.tol": solver.tol,
-        "ipopt.hessian_approximation": "limited-memory",
-    }
-
-
-def _light_position(sphere: LightSphere, zenith: ca.MX, azimuth: ca.MX) -> ca.MX:
-    """a(θ, φ) = O + b R_WS (sinθ cosφ, sinθ sinφ, cosθ), symbolic."""
-    d = ca.vertcat(ca.sin(zenith) * ca.cos(azimuth), ca.sin(zenith) * ca.sin(azimuth), ca.cos(zenith))
-    return ca.DM(sphere.center) + sphere.radius * ca.mtimes(ca.DM(sphere.rotation), d)
-
-
-def _run(nlp: Any, args: dict[str, Any]) -> Solve:
-    result = nlp(**args)
-    stats = nlp.stats()
-    x = np.asarray(result["x"], float).ravel()
-    return Solve(
-        x, int(stats.get("iter_count", 0)), str(stats.get("return_status", "")), bool(stats["success"])
-    )
-
-
 class ZenithRefiner:
     """The 1-D NLP of azimuth mode, built once: ``min_θ D̃(a(θ, φ), v)`` s.t. ``θ_min ≤ θ ≤ θ_max``,
     parameters ``p = (φ, v)`` (azimuth, rad; visibility mask (P,))."""
@@ -260,14 +223,14 @@ class ZenithRefiner:
         self.sphere = scene.sphere
         zenith = ca.MX.sym("zenith")
         p = ca.MX.sym("p", 1 + scene.gbuffer.size)
-        cost = objective.function(_light_position(self.sphere, zenith, p[0]), p[1:])
+        cost = objective.function(sphere_position(self.sphere, zenith, p[0]), p[1:])
         self.nlp = ca.nlpsol(
-            "zenith_refiner", "ipopt", {"x": zenith, "p": p, "f": cost}, _ipopt_options(solver)
+            "zenith_refiner", "ipopt", {"x": zenith, "p": p, "f": cost}, ipopt_options(solver)
         )
 
     def solve(self, zenith: float, azimuth: float, visibility: Array) -> Solve:
         """Refine from ``zenith`` along ``azimuth`` (rad) with the mask ``visibility`` (P,)."""
-        return _run(
+        return run(
             self.nlp,
             {
                 "x0": zenith,
@@ -291,9 +254,9 @@ class CapRefiner:
         p = ca.MX.sym("p", size + 3 * slots)
         d = ca.vertcat(ca.sin(x[0]) * ca.cos(x[1]), ca.sin(x[0]) * ca.sin(x[1]), ca.cos(x[0]))
         accepted = ca.reshape(p[size:], 3, slots).T
-        cost = objective.function(_light_position(self.sphere, x[0], x[1]), p[:size])
+        cost = objective.function(sphere_position(self.sphere, x[0], x[1]), p[:size])
         nlp = {"x": x, "p": p, "f": cost, "g": ca.mtimes(accepted, d)}
-        self.nlp = ca.nlpsol("cap_refiner", "ipopt", nlp, _ipopt_options(solver))
+        self.nlp = ca.nlpsol("cap_refiner", "ipopt", nlp, ipopt_options(solver))
 
     def solve(
         self, zenith: float, azimuth: float, visibility: Array, accepted: Array, separation: float
@@ -304,7 +267,7 @@ class CapRefiner:
         dirs[: len(accepted)] = accepted
         ubg = np.full(self.slots, np.inf)
         ubg[: len(accepted)] = math.cos(separation)
-        return _run(
+        return run(
             self.nlp,
             {
                 "x0": [zenith, azimuth],
@@ -322,18 +285,6 @@ class CapRefiner:
 # --------------------------------------------------------------------------------------------
 
 
-def search_scene(problem: Problem, scene: Scene) -> Scene:
-    """The scene the search renders: ``scene`` itself, or the same view with its longer side at
-    ``landmarks.resolution`` when that is smaller."""
-    res = problem.landmarks.resolution
-    cam = scene.camera
-    if res >= max(cam.width, cam.height):
-        return scene
-    if cam.width >= cam.height:
-        return Scene.from_problem(problem, width=res, height=max(1, round(res * cam.height / cam.width)))
-    return Scene.from_problem(problem, width=max(1, round(res * cam.width / cam.height)), height=res)
-
-
 @dataclass(frozen=True)
 class _Candidate:
     zenith: float
@@ -345,18 +296,18 @@ class _Candidate:
 
 class _Search:
     """What both modes share: the camera-resolution scene and objective (reported costs), the search
-    scene and objective (sweeps, NLPs, candidate scores), the refinement of one seed with the
-    visibility mask recomputed between solves, and the final scoring."""
+    scene and objective (sweeps, NLPs, candidate scores), all from the built setup; the refinement of
+    one seed with the visibility mask recomputed between solves, and the final scoring."""
 
-    def __init__(self, problem: Problem, scene: Scene) -> None:
-        self.problem = problem
-        self.scene = scene
-        self.objective = Objective.from_problem(problem, scene)
-        self.search = search_scene(problem, scene)
-        self.search_objective = (
-            self.objective if self.search is scene else Objective.from_problem(problem, self.search)
-        )
-        self.sphere = scene.sphere
+    def __init__(self, setup: Setup) -> None:
+        self.spec = setup.landmark_spec
+        self.solver = setup.solver
+        self.file = setup.file
+        self.scene = setup.scene
+        self.objective = setup.objective
+        self.search = setup.search_scene
+        self.search_objective = setup.search_objective
+        self.sphere = setup.sphere
 
     def refine(
         self, seed: _Candidate, solve: Callable[[float, float, Array], Solve]
@@ -437,22 +388,19 @@ class _Search:
         return lm, self.objective.histogram_of(pixels)
 
 
-def find_landmarks(
-    problem: Problem, scene: Scene | None = None, *, progress: Progress | None = None
-) -> LandmarkSet:
-    """The landmarks of ``problem`` (``[landmarks]``, ``[objective]``, ``[solver]``): see the module
-    docstring. ``scene`` defaults to ``Scene.from_problem(problem)``; ``progress(done, total)`` is
-    called after each azimuth (azimuth mode) or each sweep row and landmark (free mode)."""
+def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> LandmarkSet:
+    """The landmarks of a built problem (``[landmarks]``, ``[objective]``, ``[solver]``): see the
+    module docstring. ``progress(done, total)`` is called after each azimuth (azimuth mode) or each
+    sweep row and landmark (free mode)."""
     t0 = time.perf_counter()
-    scene = scene if scene is not None else Scene.from_problem(problem)
-    search = _Search(problem, scene)
-    if problem.landmarks.mode == "azimuth":
+    search = _Search(setup)
+    if search.spec.mode == "azimuth":
         landmarks, histograms, grid = _azimuth_mode(search, progress)
     else:
         landmarks, histograms, grid = _free_mode(search, progress)
     return LandmarkSet(
         landmarks=tuple(landmarks),
-        mode=problem.landmarks.mode,
+        mode=search.spec.mode,
         reference_histogram=search.objective.reference.histogram,
         reference_label=search.objective.reference.label,
         histograms=np.array(histograms).reshape(len(landmarks), -1),
@@ -463,8 +411,8 @@ def find_landmarks(
 
 
 def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
-    spec = search.problem.landmarks
-    refiner = ZenithRefiner(search.search, search.search_objective, search.problem.solver)
+    spec = search.spec
+    refiner = ZenithRefiner(search.search, search.search_objective, search.solver)
     zenith = zenith_grid(search.sphere, math.radians(spec.sweep_step_deg))
     azimuth = 2 * np.pi * np.arange(spec.count) / spec.count
     costs = np.empty((spec.count, zenith.size))
@@ -495,7 +443,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
 
 
 def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
-    spec = search.problem.landmarks
+    spec = search.spec
     step = math.radians(spec.sweep_step_deg)
     separation = math.radians(spec.min_separation_deg)
     zenith = zenith_grid(search.sphere, step)
@@ -508,7 +456,7 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
         azimuth,
         None if progress is None else (lambda done, _n: progress(done, total)),
     )
-    refiner = CapRefiner(search.search, search.search_objective, search.problem.solver, spec.count)
+    refiner = CapRefiner(search.search, search.search_objective, search.solver, spec.count)
     # Samples as unique directions: the pole (θ = 0) once, not once per azimuth.
     jj, ii = np.meshgrid(np.arange(azimuth.size), np.arange(zenith.size), indexing="ij")
     keep = (zenith[ii] > 0) | (jj == 0)
@@ -544,7 +492,7 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
             progress(azimuth.size + len(landmarks), total)
     if len(landmarks) < spec.count:
         raise ProblemError(
-            str(search.problem.source or "<inline>"),
+            search.file,
             "landmarks.count",
             f"at most {len(landmarks)} landmarks {spec.min_separation_deg:g}° apart on the allowed cap "
             "(or a smaller landmarks.min_separation_deg)",

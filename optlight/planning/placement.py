@@ -59,19 +59,20 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.environment import Environment
-from optlight.geometry import LightSphere, h_residual
+from optlight.geometry import h_residual
 from optlight.objectives import Objective
-from optlight.planning.landmarks import _ipopt_options, _run, exact_cost, search_scene
-from optlight.planning.trajectory import _tangent_basis
-from optlight.robot import KinematicState, Robot, generalized_ik, ik_settings
+from optlight.planning.landmarks import exact_cost
+from optlight.planning.nlp import environment_rows, ipopt_options, light_rows, pin_rows, run, tangent_basis
+from optlight.robot import KinematicState, generalized_ik
 from optlight.scene import Scene
-from optlight.spec import Problem
+from optlight.setup import Setup
 
 Array = NDArray[np.float64]
 
@@ -139,38 +140,23 @@ class PlacementResult:
 
 
 class LightPlacement:
-    """The joint-space placement NLP of ``robot`` (see the module docstring), built once.
+    """The joint-space placement NLP of a built setup (see the module docstring), built once.
 
-    ``scene`` is the problem's scene at the camera's resolution (reported costs). ``objective``
-    (default: the problem's) is an objective over ``scene``'s pixels; when given, the NLP renders at
-    ``scene``'s own resolution (its reference and pixel selection belong to those pixels), otherwise
-    at the landmark search's resolution with the problem's objective built there. ``environment``
-    (default: built from the problem) adds its clearance and view rows when the problem's
-    ``[environment] enabled`` is set; it is ignored otherwise.
+    The NLP renders the setup's search scene with its search objective; reported costs use the
+    camera-resolution scene and objective. The setup's environment (None when ``[environment]`` is
+    not enabled) adds its clearance and view rows.
     """
 
-    def __init__(
-        self,
-        problem: Problem,
-        scene: Scene,
-        robot: Robot,
-        objective: Objective | None = None,
-        *,
-        environment: Environment | None = None,
-    ) -> None:
-        self.problem = problem
-        self.scene = scene
-        self.robot = robot
-        self.sphere = sphere = scene.sphere
-        if objective is None:
-            self.objective = Objective.from_problem(problem, scene)
-            self.search = search_scene(problem, scene)
-            self.search_objective = (
-                self.objective if self.search is scene else Objective.from_problem(problem, self.search)
-            )
-        else:
-            self.objective = self.search_objective = objective
-            self.search = scene
+    def __init__(self, setup: Setup) -> None:
+        self.scene = setup.scene
+        self.robot = robot = setup.robot
+        self.sphere = sphere = setup.sphere
+        self.objective = setup.objective
+        self.search = setup.search_scene
+        self.search_objective = setup.search_objective
+        #: The environment whose rows are constraints, or None.
+        self.environment = setup.environment
+        self._ik = dict(setup.ik)
 
         theta = ca.MX.sym("theta", robot.n)
         visibility = ca.MX.sym("v", self.search.gbuffer.size)
@@ -185,34 +171,24 @@ class LightPlacement:
         )
         p = ca.MX.sym("p", 1 + self.search.gbuffer.size)
         phi = p[0]
-        center = ca.DM(sphere.center)
-        h = rot.T @ (center - a) - ca.DM([0.0, 0.0, sphere.radius])
-        u = ca.DM(sphere.rotation.T) @ (a - center) / sphere.radius
+        u = ca.DM(sphere.rotation.T) @ (a - ca.DM(sphere.center)) / sphere.radius
         plane = -ca.sin(phi) * u[0] + ca.cos(phi) * u[1]
         side = ca.cos(phi) * u[0] + ca.sin(phi) * u[1]
         cost = self.cost_function(theta, p[1:])
         self.objective_scale = _objective_scale(self.search, self.search_objective)
-        options = _ipopt_options(problem.solver) | {
-            "ipopt.obj_scaling_factor": self.objective_scale,
-            "ipopt.constr_viol_tol": CONSTRAINT_TOL,
-            "ipopt.acceptable_constr_viol_tol": CONSTRAINT_TOL,
-        }
-        #: The problem's environment when enabled (its rows are constraints), else None.
-        self.environment = (
-            (environment if environment is not None else Environment.from_problem(problem))
-            if problem.environment.enabled
-            else None
+        options = ipopt_options(
+            setup.solver,
+            ipopt__obj_scaling_factor=self.objective_scale,
+            ipopt__constr_viol_tol=CONSTRAINT_TOL,
+            ipopt__acceptable_constr_viol_tol=CONSTRAINT_TOL,
         )
-        rows = [h, plane, side, u[2]]
+        rows = [light_rows(a, rot, sphere.center, sphere.radius), plane, side, u[2]]
         if self.environment is not None:
-            rows.append(self.environment.clearance_function(robot)(theta))
-            if self.environment.view_cone is not None:
-                rows.append(self.environment.view_cone_function(robot)(theta))
+            rows.append(environment_rows(self.environment, robot, theta))
         g = ca.vertcat(*rows)
         n_env = g.size1() - (ZENITH_ROW + 1)
         nlp = {"x": theta, "p": p, "f": cost, "g": g}
         self.nlp = ca.nlpsol("light_placement", "ipopt", nlp, options)
-        self._ik = ik_settings(problem.solver)
         # g = [h (3), plane, side, u_z, c, v]; "free" switches the two azimuth rows off through their
         # bounds; the environment rows are ≥ 0.
         # A zenith bound at the pole (θ_min = 0, θ_max = π) is implied by h = 0 and dropped: u_z ≤ 1 is
@@ -245,9 +221,9 @@ class LightPlacement:
         best: PlacementResult | None = None
         iterations = 0
         for _ in range(VISIBILITY_ROUNDS):
-            run = _run(self.nlp, {"x0": theta, "p": np.r_[phi, mask], **bounds})
-            iterations += run.iterations
-            candidate = self._result(run.x, run.success, run.status)
+            solved = run(self.nlp, {"x0": theta, "p": np.r_[phi, mask], **bounds})
+            iterations += solved.iterations
+            candidate = self._result(solved.x, solved.success, solved.status)
             # a failed re-solve never replaces a success; among successes the lower cost wins
             if best is None or (candidate.success and (not best.success or candidate.cost < best.cost)):
                 best = candidate
@@ -256,7 +232,7 @@ class LightPlacement:
             new_mask = self.search.visibility(candidate.position)
             if np.array_equal(new_mask, mask):
                 break
-            theta, mask = run.x, new_mask
+            theta, mask = solved.x, new_mask
         assert best is not None  # VISIBILITY_ROUNDS ≥ 1
         if best.on_boundary:
             best, more = self._step_inside(best, best.azimuth if azimuth is None else phi)
@@ -352,9 +328,9 @@ class LightPlacement:
                 continue
             lbg[ZENITH_ROW] = ubg[ZENITH_ROW] = math.cos(zenith)
             args = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
-            run = _run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
-            iterations += run.iterations
-            inside.append(self._result(run.x, run.success, run.status))
+            solved = run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
+            iterations += solved.iterations
+            inside.append(self._result(solved.x, solved.success, solved.status))
         inside = [r for r in inside if r.success]
         margin = math.degrees(BOUNDARY_MARGIN)
         if not inside:
@@ -381,26 +357,24 @@ class ClearPosture:
     from ``[solver]``. Built once; :meth:`solve` checks its answer with pinocchio.
     """
 
-    def __init__(self, problem: Problem, robot: Robot, environment: Environment) -> None:
-        self.robot, self.environment = robot, environment
-        self.sphere = sphere = LightSphere.from_problem(problem)
+    def __init__(self, setup: Setup, environment: Environment) -> None:
+        self.robot = robot = setup.robot
+        self.environment = environment
+        self.sphere = sphere = setup.sphere
         n = robot.n
         theta = ca.MX.sym("theta", n)
         p = ca.MX.sym("p", n + 9)
         theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
         a, rot = robot.symbolic_light_pose(theta)
-        rows = [
-            rot.T @ (ca.DM(sphere.center) - a) - ca.DM([0.0, 0.0, sphere.radius]),
-            ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target)),
-            environment.clearance_function(robot)(theta),
-        ]
-        if environment.view_cone is not None:
-            rows.append(environment.view_cone_function(robot)(theta))
-        g = ca.vertcat(*rows)
+        g = ca.vertcat(
+            light_rows(a, rot, sphere.center, sphere.radius),
+            pin_rows(a, target, t1, t2),
+            environment_rows(environment, robot, theta),
+        )
         self._lbg = np.zeros(g.size1())  # 5 equalities, then the environment's rows ≥ 0
         self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
-        options = _ipopt_options(problem.solver) | {"ipopt.hessian_approximation": "exact"}
-        nlp = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
+        options = ipopt_options(setup.solver, ipopt__hessian_approximation="exact")
+        nlp: dict[str, Any] = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
         self.nlp = ca.nlpsol("clear_posture", "ipopt", nlp, options)
 
     def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float, str] | None:
@@ -410,13 +384,13 @@ class ClearPosture:
         bounds: |h|∞ and the light's distance to ``target`` ≤ :data:`POSE_TOL`, every row ≥
         −:data:`CLEARANCE_TOL`)."""
         target = np.asarray(target, float)
-        t1, t2 = _tangent_basis((target - self.sphere.center) / self.sphere.radius)
+        t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)
         bounds = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": self._lbg, "ubg": self._ubg}
-        run = _run(self.nlp, {"x0": theta0, "p": np.r_[theta0, target, t1, t2], **bounds})
-        if not run.success:
+        solved = run(self.nlp, {"x0": theta0, "p": np.r_[theta0, target, t1, t2], **bounds})
+        if not solved.success:
             return None
-        theta = np.clip(run.x, self.robot.lower, self.robot.upper)
+        theta = np.clip(solved.x, self.robot.lower, self.robot.upper)
         position, rotation = self.robot.light_pose(theta)
         h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
         clearance, row = self.environment.worst_sphere_row(self.robot, theta)

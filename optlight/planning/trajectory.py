@@ -22,7 +22,7 @@ The per-knot constraints are one SX function mapped over the knots, so the graph
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import casadi as ca
@@ -31,7 +31,10 @@ from numpy.typing import NDArray
 
 from optlight.errors import SolverError
 from optlight.geometry import LightSphere
+from optlight.planning.nlp import arc_rows, ipopt_options, light_rows, pin_rows, tangent_basis
 from optlight.planning.path import LightPath
+from optlight.setup import Setup
+from optlight.spec import SolverSpec
 
 Array = NDArray[np.float64]
 
@@ -51,14 +54,6 @@ class TrajectoryNLPResult:
     max_h_residual: float
     iterations: int
     time_s: float
-
-
-def _tangent_basis(u: Array) -> tuple[Array, Array]:
-    """Two unit vectors orthogonal to the unit vector u and to each other."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(u[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    t1 = np.cross(u, helper)
-    t1 /= np.linalg.norm(t1)
-    return t1, np.cross(u, t1)
 
 
 class TrajectoryOptimizer:
@@ -82,9 +77,7 @@ class TrajectoryOptimizer:
         clearance: ca.Function | None = None,
         view: ca.Function | None = None,
         view_mode: str = "capture",
-        max_iter: int = 300,
-        tol: float = 1e-8,
-        verbose: bool = False,
+        solver: SolverSpec | None = None,
     ) -> None:
         self.robot = robot
         self.path_mode = path_mode
@@ -94,14 +87,10 @@ class TrajectoryOptimizer:
         self.clearance = clearance
         self.view = view
         self.view_mode = view_mode
-        self.options = {
-            "ipopt.max_iter": int(max_iter),
-            "ipopt.tol": float(tol),
-            "ipopt.constr_viol_tol": 1e-9,
-            "ipopt.print_level": 5 if verbose else 0,
-            "ipopt.sb": "yes",
-            "print_time": bool(verbose),
-        }
+        # the exact Hessian (IPOPT's default): the knot rows are small SX graphs, cheap to differentiate
+        self.options = ipopt_options(
+            solver or SolverSpec(), ipopt__constr_viol_tol=1e-9, ipopt__hessian_approximation="exact"
+        )
         self._solvers: dict[tuple[int, tuple[int, ...]], ca.Function] = {}
         self._knot_fn = self._build_knot_function()
 
@@ -115,11 +104,9 @@ class TrajectoryOptimizer:
         )
         radius = ca.SX.sym("b")
         a, rot = self.robot.symbolic_light_pose(theta)
-        h = rot.T @ (center - a) - ca.vertcat(0, 0, radius)
-        d = a - center
-        plane = ca.dot(normal, d)
-        wedge = ca.vertcat(ca.dot(ca.cross(normal, u0), d), ca.dot(ca.cross(u1, normal), d))
-        pin = ca.vertcat(ca.dot(t1, a - target), ca.dot(t2, a - target))
+        h = light_rows(a, rot, center, radius)
+        plane, wedge = arc_rows(a, center, normal, u0, u1)
+        pin = pin_rows(a, target, t1, t2)
         return ca.Function(
             "knot_constraints",
             [theta, center, radius, normal, u0, u1, t1, t2, target],
@@ -199,10 +186,10 @@ class TrajectoryOptimizer:
             u0, u1 = path.directions[seg.start], path.directions[seg.stop - 1]
             normal = np.cross(u0, u1)
             norm = np.linalg.norm(normal)
-            normal = normal / norm if norm > 1e-12 else _tangent_basis(u0)[0]
+            normal = normal / norm if norm > 1e-12 else tangent_basis(u0)[0]
             per_knot[seg, 0:3], per_knot[seg, 3:6], per_knot[seg, 6:9] = normal, u0, u1
         for k in range(n_knots):
-            per_knot[k, 9:12], per_knot[k, 12:15] = _tangent_basis(path.directions[k])
+            per_knot[k, 9:12], per_knot[k, 12:15] = tangent_basis(path.directions[k])
         per_knot[:, 15:18] = path.positions
         p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
         lbg, ubg = self.bounds(n_knots, len(landmark_knots))
@@ -228,3 +215,45 @@ class TrajectoryOptimizer:
             iterations=int(stats["iter_count"]),
             time_s=elapsed,
         )
+
+
+def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPResult:
+    """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n).
+
+    Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits). With an
+    environment the NLP is solved twice: first without it, then with the clearance and view-cone rows
+    from that solution (a continuation: the free optimum is smooth and mostly clear, which the
+    constrained solve converges from far better than from the per-knot IK); when that fails, from the
+    per-knot IK itself. Raises :class:`SolverError` when no solve succeeds.
+    """
+    environment = setup.environment
+
+    def optimizer(with_environment: bool) -> TrajectoryOptimizer:
+        env = environment if with_environment else None
+        return TrajectoryOptimizer(
+            setup.robot,
+            path_mode=setup.trajectory_spec.path,
+            max_step=setup.trajectory_spec.max_step_rad,
+            joint_weights=1.0 / setup.limits.velocity**2,
+            clearance=env.clearance_function(setup.robot) if env else None,
+            view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
+            view_mode=env.view_mode if env else "capture",
+            solver=setup.solver,
+        )
+
+    nlp = optimizer(False).solve(path, setup.sphere, warm)
+    if environment is not None:
+        constrained = optimizer(True)
+        start = nlp.theta if nlp.success else warm
+        free_time = nlp.time_s
+        nlp = constrained.solve(path, setup.sphere, start)
+        if not nlp.success and start is not warm:
+            nlp = constrained.solve(path, setup.sphere, warm)
+        nlp = replace(nlp, time_s=nlp.time_s + free_time)
+    if not nlp.success:
+        raise SolverError(
+            f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
+            f"max |h| = {nlp.max_h_residual:.2e} m); try a smaller [trajectory] knot_spacing_deg, a "
+            'larger max_step_rad or path = "free"'
+        )
+    return nlp

@@ -1,4 +1,4 @@
-"""The robot that carries the light: loading, CasADi kinematics, h(θ), generalized IK, reachability.
+"""The robot that carries the light: loading, CasADi kinematics, h(θ), generalized IK.
 
 - :func:`load_robot` / :class:`Robot` (:mod:`.loading`): named arms from example-robot-data or a user
   URDF, hand joints locked, base placement applied, ``flange`` and ``light`` frames added, joint angles
@@ -7,14 +7,11 @@
   (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (DESIGN §3) and the
   light's sphere coordinates :func:`light_angles`.
 - :func:`generalized_ik` (:mod:`.ik`, tasks in :mod:`.tasks`): δθ = J# e + (I − J⁺J) γ.
-- :func:`reachability_map` (:mod:`.reach`): IK success and manipulability over the light cap, and the
-  cells the environment takes away (reached only by colliding or blocking the camera).
 """
 
 from optlight.robot.ik import DEFAULT_GAINS, IKResult, generalized_ik, ik_settings, null_space_step
 from optlight.robot.kinematics import light_angles, light_residual, symbolic_frame_pose
 from optlight.robot.loading import SUPPORTED_ROBOTS, Robot, load_robot
-from optlight.robot.reach import ReachabilityMap, reachability_map
 from optlight.robot.tasks import (
     JointLimitTask,
     KinematicState,
@@ -35,7 +32,6 @@ __all__ = [
     "LightPoseTask",
     "ManipulabilityTask",
     "PostureTask",
-    "ReachabilityMap",
     "Robot",
     "generalized_ik",
     "ik_settings",
@@ -44,6 +40,5 @@ __all__ = [
     "load_robot",
     "manipulability",
     "null_space_step",
-    "reachability_map",
     "symbolic_frame_pose",
 ]

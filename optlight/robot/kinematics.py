@@ -116,12 +116,9 @@ def light_residual(
     expression through :attr:`Robot.symbolic_light_pose`. h = 0 iff the light is on the sphere and
     points at its centre; h_z = −(distance error), (h_x, h_y) ≈ b·(pointing error in rad).
     """
-    if isinstance(theta, ca.SX | ca.MX):
-        pose: Any = robot.symbolic_light_pose(theta)  # SX in → SX out, MX in → MX out
-        p, r = pose
-        return r.T @ (ca.DM(sphere.center) - p) - ca.DM([0.0, 0.0, sphere.radius])
-    p_num, r_num = robot.light_pose(theta)
-    return h_residual(p_num, r_num, sphere.center, sphere.radius)
+    pose: Any = robot.symbolic_light_pose(theta) if isinstance(theta, ca.SX | ca.MX) else robot.light_pose(theta)
+    position, rotation = pose  # SX in → SX out, MX in → MX out
+    return h_residual(position, rotation, sphere.center, sphere.radius)
 
 
 def light_angles(robot: Robot, sphere: LightSphere, theta: ArrayLike) -> tuple[float, float]:

@@ -13,6 +13,7 @@ Pixel vectors (P,) follow ``scene.gbuffer.pixel_index`` (row-major object pixels
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -44,8 +45,9 @@ class Scene:
     vertex, ``light`` (:class:`LightSpec`), ``gbuffer`` (:class:`GBuffer`).
     """
 
-    def __init__(self, problem: Problem, camera: Camera, obj: SceneObject) -> None:
-        """Check that the object lies inside the light sphere, then cast the primary rays.
+    def __init__(self, problem: Problem, camera: Camera, obj: SceneObject, caster: Any = None) -> None:
+        """Check that the object lies inside the light sphere, then cast the primary rays
+        (``caster``: the object's ray intersector when already built, e.g. by another resolution).
 
         Raises :class:`ProblemError` with key ``light_sphere.radius_m`` when a vertex is at b or
         farther from O (the light could not circle the object), and key ``camera`` when no pixel
@@ -68,7 +70,7 @@ class Scene:
                 "object point from object.center_m)",
                 self.sphere.radius,
             )
-        self._caster = intersector(obj.mesh)
+        self._caster = caster if caster is not None else intersector(obj.mesh)
         self.gbuffer: GBuffer = build_gbuffer(camera, obj, self._caster)
         if self.gbuffer.size == 0:
             raise ProblemError(
@@ -82,29 +84,45 @@ class Scene:
 
     @classmethod
     def from_problem(cls, problem: Problem, width: int | None = None, height: int | None = None) -> Scene:
-        """The scene of a problem, optionally at another resolution.
-
-        Giving ``width`` and/or ``height`` resamples the same view: fx, fy scale by W'/W, H'/H and
-        the principal point by c' = (c + ½)·W'/W − ½ (pixel centres at integers); a missing one
-        keeps the aspect ratio.
-        """
-        obj = build_object(problem)
+        """The scene of a problem (its object built here), optionally at another resolution
+        (see :meth:`resampled`). Raises :class:`ProblemError` (key ``camera.look_at_m``) when the
+        object centre is not inside the camera's image."""
         camera = Camera.from_spec(problem.camera, problem.object.center_m)
-        if width is not None or height is not None:
-            w0, h0 = camera.width, camera.height
-            w = int(width) if width is not None else max(1, round(w0 * int(height or h0) / h0))
-            h = int(height) if height is not None else max(1, round(h0 * w / w0))
-            sx, sy = w / w0, h / h0
-            camera = dataclasses.replace(
-                camera,
-                fx=camera.fx * sx,
-                fy=camera.fy * sy,
-                cx=(camera.cx + 0.5) * sx - 0.5,
-                cy=(camera.cy + 0.5) * sy - 0.5,
-                width=w,
-                height=h,
+        centre = np.asarray(problem.object.center_m, float)
+        u, v, depth = camera.project(centre[None, :])
+        if depth[0] <= 0 or not (0 <= u[0] < camera.width and 0 <= v[0] < camera.height):
+            target = problem.camera.look_at_m if problem.camera.look_at_m is not None else centre.tolist()
+            raise ProblemError(
+                str(problem.source) if problem.source else "<inline>",
+                "camera.look_at_m",
+                "a camera that sees the object centre inside its image",
+                list(target),
             )
-        return cls(problem, camera, obj)
+        scene = cls(problem, camera, build_object(problem))
+        return scene if width is None and height is None else scene.resampled(width, height)
+
+    def resampled(self, width: int | None = None, height: int | None = None) -> Scene:
+        """The same view and object at another image size; the object and its ray intersector are
+        shared, only the primary rays are cast again.
+
+        fx, fy scale by W'/W, H'/H and the principal point by c' = (c + ½)·W'/W − ½ (pixel centres
+        at integers); a missing side keeps the aspect ratio.
+        """
+        camera = self.camera
+        w0, h0 = camera.width, camera.height
+        w = int(width) if width is not None else max(1, round(w0 * int(height or h0) / h0))
+        h = int(height) if height is not None else max(1, round(h0 * w / w0))
+        sx, sy = w / w0, h / h0
+        camera = dataclasses.replace(
+            camera,
+            fx=camera.fx * sx,
+            fy=camera.fy * sy,
+            cx=(camera.cx + 0.5) * sx - 0.5,
+            cy=(camera.cy + 0.5) * sy - 0.5,
+            width=w,
+            height=h,
+        )
+        return Scene(self.problem, camera, self.object, self._caster)
 
     def visibility(self, light_position: ArrayLike) -> Array:
         """Cast-shadow visibility v (P,) in {0., 1.} for a light at ``light_position`` (world, m),

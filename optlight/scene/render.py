@@ -25,17 +25,36 @@ Array = NDArray[np.float64]
 
 
 def cosine_and_falloff(
-    gbuffer: GBuffer, light_position: ArrayLike, model: str, center: ArrayLike, radius: float
+    points: ArrayLike, normals: ArrayLike, light_position: ArrayLike, model: str, center: ArrayLike, radius: float
 ) -> tuple[Array, Array]:
-    """n_i·l_i and the falloff f_i of every G-buffer pixel (see the module docstring)."""
+    """n_i·l_i and the falloff f_i of surface points p_i (N, 3) with unit normals n_i (N, 3) (see the
+    module docstring)."""
     a = np.asarray(light_position, float)
+    normals = np.asarray(normals, float)
     if model == "directional":
-        cos = gbuffer.normals @ ((a - np.asarray(center, float)) / radius)
+        cos = normals @ ((a - np.asarray(center, float)) / radius)
         return cos, np.ones_like(cos)
-    to_light = a - gbuffer.points
+    to_light = a - np.asarray(points, float)
     r2 = np.einsum("ij,ij->i", to_light, to_light)
-    cos = np.einsum("ij,ij->i", gbuffer.normals, to_light) / np.sqrt(r2)
+    cos = np.einsum("ij,ij->i", normals, to_light) / np.sqrt(r2)
     return cos, radius**2 / r2
+
+
+def lambertian(
+    points: ArrayLike,
+    normals: ArrayLike,
+    albedo: ArrayLike,
+    light_position: ArrayLike,
+    light: LightSpec,
+    center: ArrayLike,
+    radius: float,
+    visibility: ArrayLike = 1.0,
+) -> Array:
+    """g·ρ_i·(E·v_i·max(0, n_i·l_i)·f_i + k_amb) of surface points, before noise and clip: the one
+    place the model of DESIGN §4 is written (the renderer's pixels, the preview's vertices)."""
+    cos, falloff = cosine_and_falloff(points, normals, light_position, light.model, center, radius)
+    v = np.asarray(visibility, float)
+    return light.gain * np.asarray(albedo, float) * (light.power * v * np.maximum(cos, 0.0) * falloff + light.ambient)
 
 
 def shade(
@@ -53,9 +72,9 @@ def shade(
     for none; True draws η from ``np.random.default_rng(light.seed)`` afresh on each call (the same
     seed gives the same pattern); a Generator draws the next values from it.
     """
-    cos, falloff = cosine_and_falloff(gbuffer, light_position, light.model, center, radius)
-    v = np.asarray(visibility, float)
-    value = light.gain * gbuffer.albedo * (light.power * v * np.maximum(cos, 0.0) * falloff + light.ambient)
+    value = lambertian(
+        gbuffer.points, gbuffer.normals, gbuffer.albedo, light_position, light, center, radius, visibility
+    )
     if noise is not False and light.noise_std > 0:
         rng = noise if isinstance(noise, np.random.Generator) else np.random.default_rng(light.seed)
         value = value + rng.normal(0.0, light.noise_std, value.shape)

@@ -55,6 +55,7 @@ from pinocchio.visualize import MeshcatVisualizer
 
 from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
+from optlight.scene.render import lambertian
 from optlight.spec import LightSpec
 from optlight.viz.server import MeshcatServer
 
@@ -393,18 +394,9 @@ def vertex_shading(
     """Luminance per vertex (V,) in [0, 1] (1 = saturation) for a light at ``light_position`` (m):
     DESIGN §4's model, I = clip(g·ρ(E·max(0, n·l)·f + k_amb)) / s, with the vertex normals, directional
     or point light as ``light.model`` says, and no cast shadows."""
-    a = np.asarray(light_position, float)
-    normals = np.asarray(mesh.vertex_normals, float)
-    if light.model == "directional":
-        cos = normals @ ((a - sphere.center) / sphere.radius)
-        falloff = np.ones_like(cos)
-    else:
-        to_light = a - np.asarray(mesh.vertices, float)
-        r2 = np.einsum("ij,ij->i", to_light, to_light)
-        cos = np.einsum("ij,ij->i", normals, to_light) / np.sqrt(r2)
-        falloff = sphere.radius**2 / r2
-    rho = np.asarray(albedo, float)
-    value = light.gain * rho * (light.power * np.maximum(cos, 0.0) * falloff + light.ambient)
+    value = lambertian(
+        mesh.vertices, mesh.vertex_normals, albedo, light_position, light, sphere.center, sphere.radius
+    )
     return np.clip(value, 0.0, light.saturation) / light.saturation
 
 

@@ -13,7 +13,7 @@ capture): every row must be ≥ 0. The IK does not see the environment, and a re
 joint angles for the same light, so where the IK's configuration breaks a row a small NLP looks for
 clear ones near it (:class:`optlight.planning.placement.ClearPosture`: min |θ − θ_IK|² with the light
 pinned at the cell, h(θ) = 0, c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK
-start). A cell where neither
+start), the placement policy's :class:`~optlight.planning.policy.Reacher`. A cell where neither
 finds any is *taken by the environment*: the robot reaches the light there only by colliding or
 blocking the camera (as far as these local solves can tell). The map then has three kinds of cells:
 reachable (clear), taken by the environment, unreachable.
@@ -28,20 +28,15 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from optlight.geometry import LightSphere
-from optlight.robot.ik import generalized_ik, ik_settings
-from optlight.robot.loading import Robot, load_robot
-from optlight.robot.tasks import KinematicState, manipulability
-from optlight.spec import Problem
-
-if TYPE_CHECKING:
-    from optlight.environment import Environment
+from optlight.planning.policy import Reacher
+from optlight.robot import KinematicState, manipulability
+from optlight.setup import Setup
 
 Array = NDArray[np.float64]
 
@@ -197,38 +192,21 @@ class ReachabilityMap:
         return png, js
 
 
-def reachability_map(
-    problem: Problem,
-    zenith_step_deg: float = 5.0,
-    azimuth_step_deg: float = 10.0,
-    *,
-    robot: Robot | None = None,
-    environment: Environment | None = None,
-) -> ReachabilityMap:
-    """IK success and manipulability over the problem's light cap, and with ``[environment]
-    enabled`` the cells the environment takes away (see the module docstring).
+def reachability_map(setup: Setup, zenith_step_deg: float = 5.0, azimuth_step_deg: float = 10.0) -> ReachabilityMap:
+    """IK success and manipulability over the setup's light cap, and with its environment the cells
+    the environment takes away (see the module docstring).
 
-    Zenith from ``light_sphere.zenith_min_deg`` to ``zenith_max_deg`` (both included) in steps of at
-    most ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``.
-    ``robot`` defaults to ``load_robot(problem)``, ``environment`` to the problem's (used only when
-    it is enabled); IK settings from ``problem.solver``.
+    Zenith from the sphere's ``zenith_min`` to ``zenith_max`` (both included) in steps of at most
+    ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``. Each
+    cell is one :meth:`Reacher.attempt` (IK, then a clear posture), started from a reached neighbour.
     """
-    # both import optlight.robot
-    from optlight.environment import Environment
-    from optlight.planning.placement import ClearPosture
-
-    robot = robot if robot is not None else load_robot(problem)
-    if not problem.environment.enabled:
-        environment = None
-    elif environment is None:
-        environment = Environment.from_problem(problem)
-    sphere = LightSphere.from_problem(problem)
-    zmin, zmax = problem.light_sphere.zenith_min_deg, problem.light_sphere.zenith_max_deg
+    robot, sphere = setup.robot, setup.sphere
+    reacher = Reacher(setup)
+    zmin, zmax = np.rad2deg(sphere.zenith_min), np.rad2deg(sphere.zenith_max)
     n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
     n_a = int(np.ceil(360.0 / azimuth_step_deg - 1e-9))
     zenith = np.deg2rad(np.linspace(zmin, zmax, n_z))
     azimuth = np.deg2rad(np.arange(n_a) * 360.0 / n_a)
-    settings = ik_settings(problem.solver)
 
     success = np.zeros((n_z, n_a), bool)
     manip = np.full((n_z, n_a), np.nan)
@@ -236,7 +214,6 @@ def reachability_map(
     residual = np.full((n_z, n_a), np.nan)
     taken = np.zeros((n_z, n_a), bool)
     clearance = np.full((n_z, n_a), np.nan)
-    posture: ClearPosture | None = None
     t0 = time.perf_counter()
     for i, zen in enumerate(zenith):
         for j, azi in enumerate(azimuth):
@@ -246,22 +223,15 @@ def reachability_map(
                 start = theta[i - 1, j]
             else:
                 start = robot.theta_ref
-            res = generalized_ik(robot, sphere, (zen, azi), start, **settings)
-            residual[i, j] = res.residual
-            if not res.success:
+            attempt = reacher.attempt(sphere.position(zen, azi), start)
+            residual[i, j] = attempt.ik.residual
+            if not attempt.ik.success:
                 continue
             success[i, j] = True
-            theta[i, j] = res.theta
-            if environment is not None:
-                clearance[i, j] = environment.worst_sphere_row(robot, res.theta)[0]
-                if clearance[i, j] < 0.0:
-                    if posture is None:
-                        posture = ClearPosture(problem, robot, environment)
-                    target = sphere.position(zen, azi)
-                    found = posture.solve(target, res.theta) or posture.solve(target, start)
-                    taken[i, j] = found is None
-                    if found is not None:
-                        theta[i, j], clearance[i, j], _ = found
+            theta[i, j] = attempt.ik.theta if attempt.theta is None else attempt.theta
+            if setup.environment is not None:
+                clearance[i, j] = attempt.clearance
+                taken[i, j] = attempt.theta is None
             manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
     return ReachabilityMap(
         robot.name,
@@ -272,7 +242,7 @@ def reachability_map(
         theta,
         residual,
         time.perf_counter() - t0,
-        environment=environment is not None,
+        environment=setup.environment is not None,
         taken=taken,
         clearance=clearance,
     )

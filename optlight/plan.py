@@ -1,0 +1,150 @@
+"""A solved problem: where the light goes, how the robot gets there, and the proof it is safe.
+
+:class:`Plan` holds the result of every stage of :func:`optlight.solve` (each a typed value of its
+own module) and composes them for the user: the key numbers (:meth:`Plan.summary`), the 3-D preview
+(:meth:`Plan.preview`) and the results folder (:meth:`Plan.save`, through :mod:`optlight.report`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from optlight.planning.landmarks import Landmark, LandmarkSet
+from optlight.planning.path import LightPath
+from optlight.planning.timing import Trajectory
+from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.report import save_results
+from optlight.robot import Robot
+from optlight.scene import Scene
+from optlight.setup import Setup
+from optlight.spec import Problem
+from optlight.verify import VerificationReport
+from optlight.viz.preview import Preview
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A solved problem.
+
+    ``setup`` the built problem; ``landmarks`` the landmark search; ``visited`` the landmarks kept,
+    in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
+    ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
+    knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
+    seconds per stage and ``total``; ``warnings`` what was dropped or degraded.
+    """
+
+    setup: Setup
+    landmarks: LandmarkSet
+    visited: tuple[Landmark, ...]
+    landmark_thetas: Array
+    path: LightPath
+    knot_ik: Array
+    nlp: TrajectoryNLPResult
+    trajectory: Trajectory
+    verification: VerificationReport
+    timings: dict[str, float]
+    warnings: tuple[str, ...] = field(default=())
+
+    @property
+    def problem(self) -> Problem:
+        """The problem solved."""
+        return self.setup.problem
+
+    @property
+    def scene(self) -> Scene:
+        """The scene at the camera's resolution."""
+        return self.setup.scene
+
+    @property
+    def robot(self) -> Robot:
+        """The robot that carries the light."""
+        return self.setup.robot
+
+    @property
+    def joint_path_length(self) -> float:
+        """Σ_k |θ_{k+1} − θ_k| over the optimised knots (rad)."""
+        return joint_path_length(self.nlp.theta)
+
+    @property
+    def motion_time(self) -> float:
+        """Time spent moving (s): the trajectory's duration without the dwells."""
+        intervals = self.trajectory.landmark_intervals
+        return float(self.trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0]))
+
+    @property
+    def light_directions_camera(self) -> Array:
+        """(M, 3) unit vectors from the object to the light at each capture, OpenCV camera frame."""
+        sphere = self.setup.sphere
+        d = (np.array([lm.position for lm in self.visited]) - sphere.center) / sphere.radius
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return self.scene.camera.to_camera_frame(d)
+
+    def summary(self) -> dict[str, Any]:
+        """The key numbers, JSON-safe."""
+        return {
+            "problem": self.problem.name,
+            "robot": self.robot.name,
+            "landmarks": len(self.visited),
+            "knots": self.path.n_knots,
+            "mean_landmark_cost": float(np.mean([lm.cost for lm in self.visited])),
+            "nlp_status": self.nlp.status,
+            "nlp_iterations": self.nlp.iterations,
+            "max_h_residual_m": self.nlp.max_h_residual,
+            "joint_path_length_rad": self.joint_path_length,
+            "knot_ik_path_length_rad": joint_path_length(self.knot_ik),
+            "duration_s": self.trajectory.duration,
+            "motion_time_s": self.motion_time,
+            "verification_passed": self.verification.passed,
+            "min_clearance_m": {
+                name: -check.max_value
+                for name, check in self.verification.checks.items()
+                if name in ("clearance", "self_collision", "view_cone")
+            },
+            "timings_s": dict(self.timings),
+        }
+
+    def preview(self) -> Preview:
+        """The Meshcat preview: landmarks coloured by cost, the planned path, the trajectory as an
+        animation, the object shaded for the first capture. ``.save_html(path)`` or ``.show()``."""
+        return Preview(
+            self.scene,
+            self.robot,
+            np.array([lm.position for lm in self.visited]),
+            np.array([lm.cost for lm in self.visited]),
+            self.path.positions,
+            self.trajectory,
+            light_position=self.visited[0].position,
+        )
+
+    def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
+        """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
+        plan failed verification. Returns the paths written."""
+        return save_results(
+            folder,
+            setup=self.setup,
+            landmarks=self.landmarks,
+            visited=self.visited,
+            landmark_thetas=self.landmark_thetas,
+            path=self.path,
+            nlp=self.nlp,
+            trajectory=self.trajectory,
+            verification=self.verification,
+            summary=self.summary(),
+            timings=self.timings,
+            warnings=self.warnings,
+            light_directions_camera=self.light_directions_camera,
+            preview=(lambda path: self.preview().save_html(path)) if preview else None,
+            overwrite=overwrite,
+        )
+
+
+def joint_path_length(theta: Array) -> float:
+    """Σ_k |θ_{k+1} − θ_k| (rad) of a (K, n) knot sequence."""
+    return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))

@@ -1,0 +1,208 @@
+"""The placement policy: joint angles for the lights, and what to do where the robot cannot have them.
+
+For a light position a* on the sphere:
+
+1. the generalized IK (5-D task, roll free; :func:`~optlight.robot.generalized_ik`) from a start;
+2. with an environment, where the IK's joint angles break a row of the NLPs' sphere model
+   (:meth:`Environment.worst_sphere_row`: clearance, and the view cone, a light being a capture), the
+   nearest clear posture for the same light (:class:`~optlight.planning.placement.ClearPosture`), from
+   the IK's angles, then from the start: a redundant arm has other postures for one light.
+
+:class:`Reacher` does that (built once per setup; its NLPs on first need), and the reachability map
+and :func:`place_landmarks` both use it. Where no attempt gives clear angles for a landmark,
+:func:`place_landmarks` runs the joint-space placement NLP (:class:`LightPlacement`), which moves the
+landmark along its azimuth to the best light the robot reaches clear.
+
+Also here: the visiting order of the landmarks and the per-knot IK along a path (the paper's
+pipeline, and the trajectory NLP's warm start). Angles in radians, lengths in metres.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from optlight.errors import UnreachableError
+from optlight.planning.landmarks import Landmark
+from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
+from optlight.planning.placement import ClearPosture, LightPlacement
+from optlight.robot import IKResult, generalized_ik
+from optlight.setup import Setup
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One try at a light: the IK's result, the smallest environment row (m; inf without an
+    environment or when the IK failed) and its label at the angles kept, and ``theta`` the clear
+    joint angles for the light (the IK's, or a clear posture's), None when there are none."""
+
+    ik: IKResult
+    clearance: float
+    row: str
+    theta: Array | None
+
+
+@dataclass(frozen=True)
+class LandmarkPlacement:
+    """The landmarks kept (in the order given, some "placed" by the placement NLP), their joint angles
+    (M, n) and what was moved or dropped, in words."""
+
+    landmarks: tuple[Landmark, ...]
+    thetas: Array
+    warnings: tuple[str, ...]
+
+
+class Reacher:
+    """IK, then a clear posture, for the lights of one setup (module docstring, steps 1–2)."""
+
+    def __init__(self, setup: Setup) -> None:
+        self.setup = setup
+        self._posture: ClearPosture | None = None
+        self._placement: LightPlacement | None = None
+
+    def attempt(self, position: Array, start: Array, *, restarts: bool = True) -> Attempt:
+        """Joint angles that put the light at ``position`` (m, on the sphere), clear of the setup's
+        environment, from the IK started at ``start`` (rad)."""
+        setup = self.setup
+        ik = generalized_ik(setup.robot, setup.sphere, position, start, restarts=restarts, **setup.ik)
+        environment = setup.environment
+        if not ik.success:
+            return Attempt(ik, math.inf, "", None)
+        if environment is None:
+            return Attempt(ik, math.inf, "", ik.theta)
+        clearance, row = environment.worst_sphere_row(setup.robot, ik.theta)
+        if clearance >= 0.0:
+            return Attempt(ik, clearance, row, ik.theta)
+        if self._posture is None:
+            self._posture = ClearPosture(setup, environment)
+        for posture_start in (ik.theta, start):
+            found = self._posture.solve(position, posture_start)
+            if found is not None:
+                return Attempt(ik, found[1], found[2], found[0])
+        return Attempt(ik, clearance, row, None)
+
+    @property
+    def placement(self) -> LightPlacement:
+        """The joint-space placement NLP of the setup, built on first use."""
+        if self._placement is None:
+            self._placement = LightPlacement(self.setup)
+        return self._placement
+
+
+def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reacher | None = None) -> LandmarkPlacement:
+    """Joint angles at each landmark: :meth:`Reacher.attempt` chained from the previous landmark's
+    angles, then from θ_ref.
+
+    Where neither attempt gives clear angles, the placement NLP runs on the landmark's azimuth from
+    the better attempt (reached before not; then the larger clearance, or the smaller IK residual),
+    then from the other: when it succeeds the landmark is replaced by the best light the robot reaches
+    clear on that azimuth, kept off the singular reach boundary (status "placed", its cost; a warning
+    says how far it moved and why).
+
+    Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons),
+    unless ``[landmarks] allow_partial``, which drops it with a warning.
+    """
+    reacher = reacher if reacher is not None else Reacher(setup)
+    robot, sphere = setup.robot, setup.sphere
+    kept: list[Landmark] = []
+    thetas: list[Array] = []
+    notes: list[str] = []
+    previous = robot.theta_ref
+    for lm in landmarks:
+        attempts = []
+        for start in (previous, robot.theta_ref):
+            attempts.append(reacher.attempt(lm.position, start))
+            if attempts[-1].theta is not None:
+                break
+        clear = attempts[-1].theta
+        if clear is not None:
+            kept.append(lm)
+            thetas.append(clear)
+            previous = clear
+            continue
+        attempts.sort(key=lambda a: (not a.ik.success, -a.clearance if a.ik.success else a.ik.residual))
+        best = attempts[0]
+        placed = reacher.placement.solve(lm.azimuth, best.ik.theta)
+        if not placed.success and attempts[1:]:
+            other = reacher.placement.solve(lm.azimuth, attempts[1].ik.theta)
+            placed = other if other.success else placed
+        why = (
+            f"out of reach of {robot.name}: {best.ik.message}"
+            if not best.ik.success
+            else f"blocked for {robot.name}: its IK solution brings {best.row} "
+            f"{-best.clearance * 1e3:.1f} mm too close, and no posture near it is clear"
+        )
+        if placed.success:
+            kept.append(
+                replace(
+                    lm,
+                    zenith=placed.zenith,
+                    position=placed.position,
+                    cost=placed.cost,
+                    status="placed",
+                    solver_status=placed.status,
+                    iterations=lm.iterations + placed.iterations,
+                    time_s=lm.time_s + placed.time_s,
+                )
+            )
+            thetas.append(placed.theta)
+            previous = placed.theta
+            goal = (
+                f"to be reachable by {robot.name}"
+                if not best.ik.success
+                else f"to clear the environment ({best.row} was {-best.clearance * 1e3:.1f} mm too close)"
+            )
+            before, after = f"{np.rad2deg(lm.zenith):.1f}°", f"{np.rad2deg(placed.zenith):.1f}°"
+            moved = (
+                f"moved from zenith {before} to {after}"
+                if before != after
+                else f"kept at zenith {before} with the placement's joint angles"
+            )
+            notes.append(
+                f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {moved} {goal} "
+                f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
+            )
+            continue
+        clear_of = " clear of the environment" if setup.environment is not None else ""
+        where = (
+            f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
+            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear_of} within "
+            f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
+            f"(placement NLP: {placed.message})"
+        )
+        if not setup.landmark_spec.allow_partial:
+            raise UnreachableError(
+                f"{where}; move the robot base ([robot] base_position_m) or set [landmarks] allow_partial = true"
+            )
+        notes.append(f"dropped {where}")
+    if not kept:
+        raise UnreachableError(f"no landmark is reachable by {robot.name}")
+    return LandmarkPlacement(tuple(kept), np.array(thetas), tuple(notes))
+
+
+def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int64]:
+    """Azimuth order, or a short open tour in joint space (``[trajectory] order``)."""
+    if setup.trajectory_spec.order == "tour":
+        thetas = placement.thetas
+        return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
+    return azimuth_order([lm.azimuth for lm in placement.landmarks])
+
+
+def knot_ik(setup: Setup, path: LightPath, theta_start: Array) -> tuple[Array, int]:
+    """Per-knot generalized IK along the path, each knot started from the previous one (the paper's
+    pipeline). Returns the (K, n) angles and the number of knots where IK did not converge."""
+    robot = setup.robot
+    thetas = np.empty((path.n_knots, robot.n))
+    previous, failures = theta_start, 0
+    for k, position in enumerate(path.positions):
+        # no random restarts: a restart lands on another IK branch, a jump the path cannot make
+        result = generalized_ik(robot, setup.sphere, position, previous, restarts=False, **setup.ik)
+        failures += not result.success
+        thetas[k] = previous = result.theta
+    return thetas, failures

@@ -1,0 +1,39 @@
+"""Shared fixtures: built-in problems reduced to test sizes, and built setups of them.
+
+Tests import :func:`reduced_problem` (``from conftest import reduced_problem``) where a module needs
+its own variant at import time; fixtures give the common ones, built once per session.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from optlight.setup import Setup
+from optlight.spec import Problem, load_problem, problem_from_dict
+
+
+def reduced_problem(name: str = "default", *, camera_px: int | None = None, **sections: dict[str, Any]) -> Problem:
+    """A built-in problem with a ``camera_px``² camera (when given) and each of ``sections``
+    (``landmarks={"count": 8}``, ``object={"face": {"resolution": 48}}`` …) merged key by key into the
+    file's section; the source path is kept so that relative data paths still resolve."""
+    original = load_problem(name)
+    data = original.to_dict()
+    if camera_px is not None:
+        data["camera"].update(width=camera_px, height=camera_px)
+    for section, values in sections.items():
+        data.setdefault(section, {}).update(values)
+    return problem_from_dict(data, source=original.source)
+
+
+@pytest.fixture(scope="session")
+def small_default() -> Problem:
+    """The default problem with a 96² camera and 8 landmarks: the whole pipeline in seconds."""
+    return reduced_problem(camera_px=96, landmarks={"count": 8})
+
+
+@pytest.fixture(scope="session")
+def small_setup(small_default: Problem) -> Setup:
+    """:func:`small_default` built once."""
+    return Setup.from_problem(small_default)
