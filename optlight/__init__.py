@@ -28,7 +28,9 @@ from optlight.geometry import LightSphere
 from optlight.spec import Problem, available_problems, load_problem, problem_from_dict
 
 if TYPE_CHECKING:
+    from optlight.lightsets import LightSetResult, design_light_set
     from optlight.objectives import Objective
+    from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import Plan, solve
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
     from optlight.planning.timing import Trajectory, time_parameterize
@@ -44,6 +46,10 @@ _LAZY = {
     "Camera": "optlight.scene",
     "Scene": "optlight.scene",
     "Objective": "optlight.objectives",
+    "LightSetResult": "optlight.lightsets",
+    "design_light_set": "optlight.lightsets",
+    "NormalRecovery": "optlight.photometric_stereo",
+    "recover_normals": "optlight.photometric_stereo",
     "Landmark": "optlight.planning.landmarks",
     "LandmarkSet": "optlight.planning.landmarks",
     "find_landmarks": "optlight.planning.landmarks",
@@ -78,7 +84,9 @@ __all__ = [
     "IKResult",
     "Landmark",
     "LandmarkSet",
+    "LightSetResult",
     "LightSphere",
+    "NormalRecovery",
     "Objective",
     "OptlightError",
     "Plan",
@@ -95,6 +103,7 @@ __all__ = [
     "VerificationError",
     "VerificationReport",
     "available_problems",
+    "design_light_set",
     "find_landmarks",
     "generalized_ik",
     "load_problem",
@@ -102,6 +111,7 @@ __all__ = [
     "save_gray_png",
     "load_robot",
     "reachability_map",
+    "recover_normals",
     "solve",
     "time_parameterize",
     "verify_trajectory",

@@ -91,7 +91,9 @@ def diligent_files(
     dirs = np.asarray(directions_camera, float)
     n = len(dirs)
     if imgs.ndim != 3 or imgs.shape[0] != n or dirs.shape != (n, 3):
-        raise OptlightError(f"DiLiGenT export needs images (N, H, W) and directions (N, 3); got {imgs.shape}, {dirs.shape}")
+        raise OptlightError(
+            f"DiLiGenT export needs images (N, H, W) and directions (N, 3); got {imgs.shape}, {dirs.shape}"
+        )
     if not np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6):
         raise OptlightError("light directions must be unit vectors")
     strength = np.asarray(intensities, float)
@@ -100,7 +102,11 @@ def diligent_files(
     if m.shape != imgs.shape[1:]:
         raise OptlightError(f"mask of shape {m.shape} for images of {imgs.shape[1:]}")
     files = list(names) if names is not None else [f"{i + 1:03d}.png" for i in range(n)]
-    if len(files) != n or len(set(files)) != n or any(not f or any(c.isspace() for c in f) or "/" in f for f in files):
+    if (
+        len(files) != n
+        or len(set(files)) != n
+        or any(not f or any(c.isspace() for c in f) or "/" in f for f in files)
+    ):
         raise OptlightError("image names must be N distinct plain file names without whitespace")
     out: Files = {
         "filenames.txt": "".join(f"{name}\n" for name in files).encode(),
@@ -173,7 +179,9 @@ def read_diligent(folder: str | Path) -> DiligentFolder:
     except (OSError, ValueError) as e:
         raise OptlightError(f"{root}: not a readable DiLiGenT folder ({e})") from None
     if directions.shape != (len(names), 3) or intensities.shape != (len(names), 3):
-        raise OptlightError(f"{root}: {len(names)} file names but directions {directions.shape}, intensities {intensities.shape}")
+        raise OptlightError(
+            f"{root}: {len(names)} file names but directions {directions.shape}, intensities {intensities.shape}"
+        )
     return DiligentFolder(names, images, directions, intensities, mask)
 
 

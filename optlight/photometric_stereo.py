@@ -62,7 +62,9 @@ class NormalRecovery:
         recovered."""
         ref = np.asarray(reference, float)
         if ref.shape != self.normals.shape:
-            raise OptlightError(f"reference normals of shape {ref.shape} for a recovery of {self.normals.shape}")
+            raise OptlightError(
+                f"reference normals of shape {ref.shape} for a recovery of {self.normals.shape}"
+            )
         cos = np.clip(np.einsum("hwk,hwk->hw", self.normals, ref), -1.0, 1.0)
         return np.where(self.valid, np.degrees(np.arccos(cos)), np.nan)
 
@@ -119,7 +121,9 @@ def recover_normals(
     if min_lights < 3:
         raise OptlightError(f"min_lights must be at least 3 (three unknowns per pixel), got {min_lights}")
     if imgs.ndim != 3 or imgs.shape[0] != n or dirs.shape != (n, 3):
-        raise OptlightError(f"photometric stereo needs images (N, H, W) and directions (N, 3); got {imgs.shape}, {dirs.shape}")
+        raise OptlightError(
+            f"photometric stereo needs images (N, H, W) and directions (N, 3); got {imgs.shape}, {dirs.shape}"
+        )
     if not np.allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6):
         raise OptlightError("light directions must be unit vectors")
     e = np.ones(n) if intensities is None else np.asarray(intensities, float).reshape(n)
@@ -163,9 +167,7 @@ def recover_normals(
 # --------------------------------------------------------------------------------------------
 
 
-def render_set(
-    scene: Scene, directions: ArrayLike, noise: bool | np.random.Generator = False
-) -> Array:
+def render_set(scene: Scene, directions: ArrayLike, noise: bool | np.random.Generator = False) -> Array:
     """The images (N, H, W) of the NumPy renderer (shadow rays) for lights at directions (N, 3) in the
     sphere frame, ``a = O + b R_WS d``."""
     sphere = scene.sphere
@@ -242,7 +244,9 @@ def error_map_figure(error_deg: ArrayLike, title: str = "angular error", vmax: f
     top = vmax if vmax is not None else (float(np.percentile(finite, 99)) if finite.size else 1.0)
     fig = Figure(figsize=(5.0, 4.2))
     ax = fig.add_subplot()
-    image = ax.imshow(np.ma.masked_invalid(err), cmap="magma", vmin=0.0, vmax=max(top, 1e-9), interpolation="nearest")
+    image = ax.imshow(
+        np.ma.masked_invalid(err), cmap="magma", vmin=0.0, vmax=max(top, 1e-9), interpolation="nearest"
+    )
     fig.colorbar(image, ax=ax, label="degrees")
     ax.set_title(title)
     ax.set_axis_off()

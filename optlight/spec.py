@@ -432,7 +432,9 @@ class LightSetSpec:
         4.0, "exponent s of the Riesz energy (rti); s > 2 spreads the lights evenly", lo=0.0, lo_open=True
     )
     image_weight: float = key(
-        0.0, "weight of the [objective] image objective, averaged over the set's lights, added to the set cost", lo=0.0
+        0.0,
+        "weight of the [objective] image objective, averaged over the set's lights, added to the set cost",
+        lo=0.0,
     )
     grid_file: str | None = key(
         None,
@@ -440,7 +442,9 @@ class LightSetSpec:
         "[, name]; default: the 64 Yale B directions shipped with optlight",
     )
     grid_deg: tuple[tuple[float, float], ...] | None = key(
-        None, "the grid as [azimuth_deg, elevation_deg] pairs relative to the camera axis (kind = grid)", unit="deg"
+        None,
+        "the grid as [azimuth_deg, elevation_deg] pairs relative to the camera axis (kind = grid)",
+        unit="deg",
     )
     grid_outside_cap: Literal["replace", "error"] = key(
         "replace", "grid directions off the cap: replace by the nearest allowed light, or refuse the file"
@@ -470,7 +474,7 @@ class Problem:
     trajectory: TrajectorySpec = section(TrajectorySpec, "path, timing and export")
     solver: SolverSpec = section(SolverSpec, "numerical settings")
     environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
-    lightset: LightSetSpec = section(LightSetSpec, "a set of lights designed together (photometric stereo, RTI, grid)")
+    lightset: LightSetSpec = section(LightSetSpec, "lights designed as a set (photometric stereo, RTI, grid)")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property

@@ -144,7 +144,9 @@ def test_per_pixel_term_counts_the_lights_that_light_each_pixel(sphere: Scene) -
     """With a sharp attached-shadow weight and no saturation, a pixel's value is tr((L_pᵀL_p + εI)⁻¹)
     over exactly the lights with n·l > 0."""
     sharp = LightSpec(softplus_sharpness=1e5, saturation=100.0)  # no pixel saturates
-    term = PhotometricStereoTerm(sphere.gbuffer.normals @ sphere.sphere.rotation, sphere.gbuffer.albedo, sharp)
+    term = PhotometricStereoTerm(
+        sphere.gbuffer.normals @ sphere.sphere.rotation, sphere.gbuffer.albedo, sharp
+    )
     directions = ring_directions(6, math.radians(50.0))
     cos = term.normals @ directions.T
     keep = np.abs(cos).min(axis=1) > 1e-3  # away from the terminator, where the weight is 0 or 1
@@ -315,7 +317,10 @@ def test_map_grid_nearest_matches_brute_force_over_a_mask() -> None:
 
 
 def test_grid_outside_the_cap_can_be_refused() -> None:
-    with pytest.raises(ProblemError, match=r"lightset.grid: expected grid directions inside the cap .*A\+000E\+90 at zenith 90.0°"):
+    with pytest.raises(
+        ProblemError,
+        match=r"lightset.grid: expected grid directions inside the cap .*A\+000E\+90 at zenith 90.0°",
+    ):
         map_grid(yale_b_grid(), Cap(0.0, math.radians(60.0)), outside_cap="error")
 
 

@@ -119,7 +119,10 @@ def test_noise_error_grows_as_the_trace_predicts(sigma: float) -> None:
 
 def test_fewer_than_three_lights_names_the_key() -> None:
     images = np.zeros((2, 4, 4))
-    with pytest.raises(ProblemError, match=r"^<api>: lightset.count: expected at least 3 lights for photometric stereo, got 2$"):
+    with pytest.raises(
+        ProblemError,
+        match=r"^<api>: lightset.count: expected at least 3 lights for photometric stereo, got 2$",
+    ):
         recover_normals(images, np.eye(3)[:2])
     with pytest.raises(OptlightError, match="images"):
         recover_normals(np.zeros((3, 4)), np.eye(3))
@@ -154,7 +157,9 @@ def test_diligent_round_trip(tmp_path: Path) -> None:
     camera_dirs = scene.camera.to_camera_frame(directions @ scene.sphere.rotation.T)
     files = diligent_files(images, camera_dirs, np.full(4, 1.0), scene.gbuffer.mask, saturation=0.9)
     recovery = recover_from_scene(scene, directions, images)
-    camera_normals = scene.camera.to_camera_frame(recovery.normals.reshape(-1, 3)).reshape(recovery.normals.shape)
+    camera_normals = scene.camera.to_camera_frame(recovery.normals.reshape(-1, 3)).reshape(
+        recovery.normals.shape
+    )
     files.update(recovery_files(camera_normals, recovery.albedo, recovery.valid))
     written = files_writer(files, "diligent")(tmp_path)
     folder = tmp_path / "diligent"
@@ -199,5 +204,7 @@ def test_diligent_bad_input(tmp_path: Path) -> None:
 
 def test_ambient_image_is_the_light_off_render() -> None:
     scene = sphere_scene(ambient=0.07, gain=1.3)
-    off = scene.to_image(scene.pixels(scene.sphere.position(0.3, 0.0), visibility=np.zeros(scene.gbuffer.size)))
+    off = scene.to_image(
+        scene.pixels(scene.sphere.position(0.3, 0.0), visibility=np.zeros(scene.gbuffer.size))
+    )
     assert np.allclose(ambient_image(scene), off)
