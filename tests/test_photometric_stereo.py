@@ -208,3 +208,31 @@ def test_ambient_image_is_the_light_off_render() -> None:
         scene.pixels(scene.sphere.position(0.3, 0.0), visibility=np.zeros(scene.gbuffer.size))
     )
     assert np.allclose(ambient_image(scene), off)
+
+
+def test_diligent_writer_plugs_into_write_results(tmp_path: Path) -> None:
+    from test_export import NAMES, directions, plan  # a small verified plan with three captures
+
+    from optlight.export import write_results
+
+    trajectory, report = plan()
+    images = np.linspace(0.0, 1.0, 3 * 4 * 5).reshape(3, 4, 5)
+    files = diligent_files(images, directions(), np.ones(3), np.ones((4, 5), bool))
+    out = tmp_path / "run"
+    written = write_results(
+        out,
+        trajectory=trajectory,
+        report=report,
+        plan_dict={},
+        joint_names=NAMES,
+        light_directions_camera=directions(),
+        image_pattern="{index:03d}.png",
+        writers=[files_writer(files, "diligent")],
+    )
+    assert {f"diligent/{name}" for name in files} <= {str(p.relative_to(out)) for p in written}
+    # the DiLiGenT directions and relight's lights.lp agree: both are (x, −y, −z) of the camera frame
+    lp = np.array(
+        [[float(x) for x in line.split()[1:]] for line in (out / "lights.lp").read_text().splitlines()[1:]]
+    )
+    assert np.allclose(np.loadtxt(out / "diligent" / "light_directions.txt"), lp, atol=1e-8)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging folder left
