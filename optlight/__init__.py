@@ -29,9 +29,11 @@ from optlight.spec import Problem, available_problems, load_problem, problem_fro
 
 if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks they agree)
     from optlight.objectives import Objective
+    from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
     from optlight.plan import Plan
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
+    from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import Trajectory, time_parameterize
     from optlight.robot import IKResult, Robot, generalized_ik, load_robot
@@ -49,6 +51,10 @@ _LAZY = {
     "Scene": "optlight.scene",
     "Objective": "optlight.objectives",
     "Setup": "optlight.setup",
+    "LightSetResult": "optlight.planning.lightsets",
+    "design_light_set": "optlight.planning.lightsets",
+    "NormalRecovery": "optlight.photometric_stereo",
+    "recover_normals": "optlight.photometric_stereo",
     "Landmark": "optlight.planning.landmarks",
     "LandmarkSet": "optlight.planning.landmarks",
     "find_landmarks": "optlight.planning.landmarks",

@@ -396,6 +396,71 @@ class EnvironmentSpec:
 
 
 @dataclass(frozen=True)
+class LightSetSpec:
+    """A set of N lights scored together (DESIGN §10) instead of landmarks matched one by one:
+    photometric stereo (the expected normal error of the set), RTI (even coverage of the cap) or a
+    given grid (a face database's directions, each mapped to the nearest allowed light). Off
+    (kind = "none") by default."""
+
+    kind: Literal["none", "photometric_stereo", "rti", "grid"] = key(
+        "none",
+        "no light set (the landmarks of [landmarks]), a photometric-stereo set, an RTI dome, or a grid",
+    )
+    count: int = key(12, "number N of lights (photometric_stereo: at least 3; rti: at least 2)", lo=1, hi=720)
+    starts: int = key(8, "random starts of the set design, uniform on the cap", lo=1, hi=1000)
+    seed: int = key(0, "seed of the random starts")
+    regularization: float = key(
+        1e-2,
+        "ε of the per-pixel M + εI (photometric_stereo): a pixel lit by fewer than 3 lights costs ~1/ε",
+        lo=0.0,
+        lo_open=True,
+    )
+    saturation_level: float = key(
+        0.98,
+        "normalised luminance from which a pixel counts as saturated (its light is not used)",
+        lo=0.0,
+        hi=1.0,
+        lo_open=True,
+    )
+    dark_level: float = key(
+        0.02,
+        "normalised luminance (ambient removed) below which a pixel counts as shadowed in normal recovery",
+        lo=0.0,
+        hi=1.0,
+    )
+    softness: float = key(0.01, "width τ of the saturation sigmoid in the set cost", lo=0.0, lo_open=True)
+    riesz_exponent: float = key(
+        4.0, "exponent s of the Riesz energy (rti); s > 2 spreads the lights evenly", lo=0.0, lo_open=True
+    )
+    image_weight: float = key(
+        0.0,
+        "weight of the [objective] image objective, averaged over the set's lights, added to the set cost",
+        lo=0.0,
+    )
+    grid_file: str | None = key(
+        None,
+        "CSV of the grid (kind = grid): columns azimuth_deg, elevation_deg relative to the camera axis "
+        "[, name]; default: the 64 Yale B directions shipped with optlight",
+    )
+    grid_deg: tuple[tuple[float, float], ...] | None = key(
+        None,
+        "the grid as [azimuth_deg, elevation_deg] pairs relative to the camera axis (kind = grid)",
+        unit="deg",
+    )
+    grid_outside_cap: Literal["replace", "error"] = key(
+        "replace", "grid directions off the cap: replace by the nearest allowed light, or refuse the file"
+    )
+    candidate_spacing_deg: float = key(
+        2.0,
+        "spacing of the candidate lights a grid direction may be replaced by",
+        unit="deg",
+        lo=0.0,
+        hi=30.0,
+        lo_open=True,
+    )
+
+
+@dataclass(frozen=True)
 class Problem:
     """A whole light-positioning problem."""
 
@@ -410,6 +475,7 @@ class Problem:
     trajectory: TrajectorySpec = section(TrajectorySpec, "path, timing and export")
     solver: SolverSpec = section(SolverSpec, "numerical settings")
     environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
+    lightset: LightSetSpec = section(LightSetSpec, "lights designed as a set (photometric stereo, RTI, grid)")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property
@@ -627,6 +693,26 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+    _check_lightset(p, file)
+
+
+def _check_lightset(p: Problem, file: str) -> None:
+    """Light counts per kind, one grid source, grid angles in range, the grid file present."""
+    ls = p.lightset
+    least = {"photometric_stereo": 3, "rti": 2}.get(ls.kind)
+    if least is not None and ls.count < least:
+        raise ProblemError(
+            file, "lightset.count", f"at least {least} lights (lightset.kind = '{ls.kind}')", ls.count
+        )
+    if ls.grid_file is not None and ls.grid_deg is not None:
+        raise ProblemError(file, "lightset.grid_deg", "either grid_deg or grid_file, not both", "both set")
+    if ls.grid_file is not None and not p.resolve(ls.grid_file).is_file():
+        raise ProblemError(file, "lightset.grid_file", "an existing CSV file", ls.grid_file)
+    for i, (_, elevation) in enumerate(ls.grid_deg or ()):
+        if not -90.0 <= elevation <= 90.0:
+            raise ProblemError(file, f"lightset.grid_deg[{i}][1]", "an elevation in [−90, 90] deg", elevation)
+
+
 
 
 def _to_plain(value: Any) -> Any:
