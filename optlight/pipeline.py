@@ -14,9 +14,11 @@ Stages (each timed in ``Plan.timings``):
    per-knot IK along the path (the paper's pipeline, and the NLP's warm start);
 5. ``nlp``: the trajectory NLP over all knots (:class:`TrajectoryOptimizer`), with clearance and
    view-cone constraints when ``[environment] enabled``;
-6. ``timing``: TOPPRA per landmark pair with a dwell at every landmark;
+6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
+   TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
-   environment).
+   environment; the jerk and the acceleration continuity at ``[trajectory] rate_hz``; the exact view
+   and beam check at the captures, always).
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment import Environment
+from optlight.environment.view import view_check_for
 from optlight.errors import SolverError, UnreachableError
 from optlight.geometry import LightSphere
+from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
 from optlight.planning.path import LightPath, azimuth_order, build_path, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
@@ -53,6 +57,11 @@ Array = NDArray[np.float64]
 Progress = Callable[[str, int, int], None]
 
 STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
+
+# Issue 11: the exact view and beam check runs on every plan. While the planner does not yet keep the
+# view clear (most captures of the default problem are blocked), it is reported without deciding the
+# verdict; set this to True once the planner keeps the links and the housing out of the view.
+ENFORCE_VIEW_CHECK = False
 
 
 @dataclass(frozen=True)
@@ -419,13 +428,21 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
 
     done = stage("timing")
     segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]  # one landmark: its dwell
-    trajectory = time_parameterize(
-        segments,
-        robot.velocity_limit * problem.robot.velocity_scale,
-        robot.acceleration_limit,
-        problem.trajectory.dwell_s,
-        joint_names=robot.joint_names,
-    )
+    jerk_limited = problem.trajectory.timing == "jerk_limited"
+    vmax = robot.velocity_limit * problem.robot.velocity_scale
+    if jerk_limited:
+        trajectory = jerk_limited_timing(
+            segments,
+            vmax,
+            robot.acceleration_limit,
+            robot.jerk_limit,
+            problem.trajectory.dwell_s,
+            joint_names=robot.joint_names,
+        )
+    else:
+        trajectory = time_parameterize(
+            segments, vmax, robot.acceleration_limit, problem.trajectory.dwell_s, joint_names=robot.joint_names
+        )
     done()
 
     done = stage("verify")
@@ -445,6 +462,10 @@ def solve(problem: Problem | str | Path, *, progress: Progress | None = None) ->
             if environment
             else None
         ),
+        jerk_limit=robot.jerk_limit if jerk_limited else None,
+        view=view_check_for(robot, scene, problem.light).check,
+        advisory=() if ENFORCE_VIEW_CHECK else ("view", "beam"),
+        rate_hz=max(1000.0, problem.trajectory.rate_hz),
     )
     done()
     timings["total"] = time.perf_counter() - t_total

@@ -2,7 +2,8 @@
 
 ``save_plan(plan, folder)`` writes, all at once or not at all (:func:`optlight.export.write_results`):
 
-- ``trajectory.csv``, ``plan.json``, ``lights.lp`` (relight / PTM light directions);
+- ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
+  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers).
@@ -16,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from optlight.export import write_results
+from optlight.export import write_captures, write_joint_trajectory, write_results
 from optlight.viz.figures import save_landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
 
@@ -41,6 +42,7 @@ def plan_dict(plan: Plan) -> dict[str, Any]:
             "upper": robot.upper,
             "velocity_limit": robot.velocity_limit * spec.velocity_scale,
             "acceleration_limit": robot.acceleration_limit,
+            "jerk_limit": robot.jerk_limit,
         },
         "landmarks": [
             {
@@ -160,7 +162,26 @@ def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, previe
         path.write_text(report_markdown(plan, names))
         return [path]
 
-    writers = [landmark_figures, *([preview_html] if preview else []), report]
+    traj_spec = plan.problem.trajectory
+
+    def joint_trajectory(folder: Path) -> list[Path]:
+        path = folder / "joint_trajectory.yaml"
+        return [write_joint_trajectory(path, plan.trajectory, robot.joint_names, traj_spec.rate_hz)]
+
+    def captures(folder: Path) -> list[Path]:
+        return [
+            write_captures(
+                folder / "captures.csv",
+                plan.trajectory,
+                settle_s=traj_spec.settle_s,
+                image_pattern=traj_spec.image_pattern,
+                light_directions_camera=plan.light_directions_camera,
+                light_positions=np.array([lm.position for lm in plan.visited]),
+                joint_names=robot.joint_names,
+            )
+        ]
+
+    writers = [landmark_figures, joint_trajectory, captures, *([preview_html] if preview else []), report]
     return write_results(
         folder,
         trajectory=plan.trajectory,
@@ -172,4 +193,5 @@ def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, previe
         figures=figures,
         writers=writers,
         overwrite=overwrite,
+        csv_rate_hz=traj_spec.rate_hz,
     )

@@ -297,3 +297,12 @@ def _surface(geometry: coal.CollisionGeometry, name: str) -> trimesh.Trimesh:
         f"collision geometry {name!r} is a {type(geometry).__name__}; the view check handles meshes, "
         "boxes, cylinders, spheres and capsules"
     )
+
+
+def view_check_for(robot: Robot, scene: Any, light: Any, *, max_points: int = MAX_POINTS) -> ViewCheck:
+    """The check of a problem's robot and scene (``scene.camera.position``, ``scene.gbuffer``) with the
+    housing of its ``[light]`` section (``housing``, ``housing_radius_m``, ``housing_length_m``)."""
+    housing = Housing(light.housing, light.housing_radius_m, light.housing_length_m)
+    return ViewCheck(
+        robot, scene.camera.position, scene.gbuffer.points, scene.gbuffer.normals, housing, max_points=max_points
+    )
