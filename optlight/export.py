@@ -22,11 +22,11 @@ in the OpenCV camera frame, the light position in the world and the joint angles
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import datetime
 import enum
 import importlib.metadata
-import csv
 import json
 import math
 import os
@@ -109,10 +109,8 @@ def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], ra
     names = list(joint_names)
     if len(names) != trajectory.dof or len(set(names)) != len(names):
         raise ValueError(f"{len(names)} joint names (distinct) are needed for {trajectory.dof} joints")
+    # the last time may pass the duration by < 0.5 ns, within what Trajectory.sample accepts
     nanoseconds = np.unique(np.round(trajectory.sample_times(rate_hz) * 1e9).astype(np.int64))
-    nanoseconds = nanoseconds[nanoseconds <= int(np.floor(trajectory.duration * 1e9))]
-    if nanoseconds[-1] < int(np.floor(trajectory.duration * 1e9)):
-        nanoseconds = np.append(nanoseconds, int(np.floor(trajectory.duration * 1e9)))
     q, qd, qdd = trajectory.sample(nanoseconds / 1e9)
     if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
         raise ValueError("the trajectory has non-finite samples")
@@ -165,7 +163,8 @@ def read_joint_trajectory(path: str | Path, *, landmark_intervals: ArrayLike | N
         raise ValueError(f"{path}: points must be a list of at least two points")
     fields = ("positions", "velocities", "accelerations")
     try:
-        t = np.array([p["time_from_start"]["sec"] + 1e-9 * p["time_from_start"]["nanosec"] for p in points])
+        ns = [int(p["time_from_start"]["sec"]) * 1_000_000_000 + int(p["time_from_start"]["nanosec"]) for p in points]
+        t = np.array(ns, float) / 1e9  # as the writer computed the times it sampled
         q, qd, qdd = (np.array([p[f] for p in points], float) for f in fields)
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(

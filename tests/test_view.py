@@ -181,3 +181,43 @@ def test_inputs_are_checked(probe) -> None:
     check = ViewCheck(probe, CAMERA, *disc(np.zeros(3), 0.1, 10), HOUSING_SMALL)
     with pytest.raises(ValueError, match="capture times"):
         check.check([[0.0, 0.0]], [0.0, 1.0])
+
+
+@pytest.mark.parametrize(
+    ("shape", "surface_distance"),
+    [
+        # analytic distance from the origin to the shape's surface along unit direction d
+        (lambda: __import__("coal").Sphere(0.05), lambda d: 0.05),
+        (
+            lambda: __import__("coal").Cylinder(0.05, 0.2),
+            lambda d: min(0.05 / max(np.hypot(d[0], d[1]), 1e-12), 0.1 / max(abs(d[2]), 1e-12)),
+        ),
+        (
+            lambda: __import__("coal").Box(0.04, 0.1, 0.06),
+            lambda d: min(0.02 / max(abs(d[0]), 1e-12), 0.05 / max(abs(d[1]), 1e-12), 0.03 / max(abs(d[2]), 1e-12)),
+        ),
+    ],
+)
+def test_primitive_surfaces_contain_the_shapes(shape, surface_distance) -> None:
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    mesh = _surface(shape(), "probe")
+    rng = np.random.default_rng(6)
+    directions = rng.normal(size=(300, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    # a ray from far outside towards the centre meets the polygon no later than the shape itself
+    origins = directions * 1.0
+    locations, index, _ = RayMeshIntersector(mesh).intersects_location(origins, -directions, multiple_hits=False)
+    assert len(index) == len(directions)
+    reach = np.linalg.norm(locations, axis=1)
+    analytic = np.array([surface_distance(d) for d in directions[index]])
+    assert np.all(reach >= analytic - 1e-6) and np.all(reach <= analytic * 1.01 + 1e-6)
+
+
+def test_a_capsule_is_a_cylinder_with_ball_ends() -> None:
+    import coal
+
+    mesh = _surface(coal.Capsule(0.03, 0.2), "capsule")
+    lo, hi = mesh.bounds
+    assert hi[2] == pytest.approx(0.1 + 0.03, rel=0.02) and lo[2] == pytest.approx(-0.13, rel=0.02)
+    assert hi[0] >= 0.03 and hi[0] <= 0.03 * 1.02

@@ -292,7 +292,9 @@ def _surface(geometry: coal.CollisionGeometry, name: str) -> trimesh.Trimesh:
         ends = [cap.copy(), cap.copy()]
         ends[0].apply_translation([0.0, 0.0, geometry.halfLength])
         ends[1].apply_translation([0.0, 0.0, -geometry.halfLength])
-        return trimesh.util.concatenate([_cylinder(geometry.radius, 2.0 * geometry.halfLength), *ends])
+        capsule = trimesh.util.concatenate([_cylinder(geometry.radius, 2.0 * geometry.halfLength), *ends])
+        assert isinstance(capsule, trimesh.Trimesh)  # concatenating meshes gives a mesh
+        return capsule
     raise RobotError(
         f"collision geometry {name!r} is a {type(geometry).__name__}; the view check handles meshes, "
         "boxes, cylinders, spheres and capsules"
