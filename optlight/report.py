@@ -107,6 +107,8 @@ def report_markdown(plan: Plan, figures: Sequence[str]) -> str:
         f"| joint path length (NLP / per-knot IK) | {s['joint_path_length_rad']:.3f} rad / "
         f"{s['knot_ik_path_length_rad']:.3f} rad |",
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
+        f"| timing | {plan.problem.trajectory.timing.replace('_', '-')}, exported at "
+        f"{plan.problem.trajectory.rate_hz:g} Hz |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
