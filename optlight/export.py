@@ -1,4 +1,5 @@
-"""Export of a verified plan: trajectory.csv, plan.json, lights.lp and figures (DESIGN §6–§7).
+"""Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml, captures.csv
+and figures (DESIGN §6–§7).
 
 Nothing is written for a plan that failed verification, and a results folder is never left half
 written: the files go into a hidden sibling folder that is renamed into place at the end.
@@ -7,10 +8,21 @@ lights.lp follows the PTM / relight convention: the first line is the number of 
 ``filename x y z`` per image, (x, y, z) the unit vector from the object towards the light with x to
 the right of the image, y towards its top and z towards the camera. From a direction d in the OpenCV
 camera frame (x right, y down, z forward) that is (d_x, −d_y, −d_z): see :func:`lp_direction`.
+
+joint_trajectory.yaml is a ROS 2 ``trajectory_msgs/JointTrajectory`` (``header``, ``joint_names``,
+``points`` with ``positions``, ``velocities``, ``accelerations``, ``effort`` and
+``time_from_start: {sec, nanosec}``), the ``trajectory`` of a ``control_msgs/FollowJointTrajectory``
+goal; with all three of positions, velocities and accelerations, joint_trajectory_controller
+interpolates quintically between the points, as :func:`read_joint_trajectory` does.
+
+captures.csv has one row per capture: its index, the dwell's start and end, the camera trigger (the
+dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light direction
+in the OpenCV camera frame, the light position in the world and the joint angles at the trigger.
 """
 
 from __future__ import annotations
 
+import csv
 import datetime
 import importlib.metadata
 import json
@@ -22,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import VerificationError
@@ -35,7 +48,7 @@ if TYPE_CHECKING:
 Array = NDArray[np.float64]
 
 #: Distributions whose versions plan.json records.
-LIBRARIES = ("numpy", "scipy", "casadi", "pin", "toppra", "meshcat", "optlight")
+LIBRARIES = ("numpy", "scipy", "casadi", "pin", "toppra", "ruckig", "meshcat", "optlight")
 #: Keys of plan.json written by :func:`write_results` itself; the caller's plan dict may not use them.
 RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
 
@@ -75,6 +88,132 @@ def image_names(pattern: str, count: int) -> list[str]:
     if bad:
         raise ValueError(f"image names may not be empty or contain whitespace (.lp format): {bad[0]!r}")
     return names
+
+
+def _yaml_float(x: float) -> str:
+    """A float YAML 1.1 readers (PyYAML) parse back exactly: repr, with a '.0' where the mantissa of
+    an exponent form has no point ('1e-05' would be read as a string)."""
+    text = repr(float(x))
+    mantissa, _, exponent = text.partition("e")
+    if exponent and "." not in mantissa:
+        text = f"{mantissa}.0e{exponent}"
+    return text
+
+
+def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float) -> str:
+    """joint_trajectory.yaml (module docstring): the trajectory sampled at :meth:`Trajectory.sample_times`
+    (``rate_hz`` plus every dwell and motion boundary), each time rounded to the nanosecond
+    ``time_from_start`` holds before the trajectory is sampled there, so the file's points are exact."""
+    names = list(joint_names)
+    if len(names) != trajectory.dof or len(set(names)) != len(names):
+        raise ValueError(f"{len(names)} joint names (distinct) are needed for {trajectory.dof} joints")
+    # the last time may pass the duration by < 0.5 ns, within what Trajectory.sample accepts
+    nanoseconds = np.unique(np.round(trajectory.sample_times(rate_hz) * 1e9).astype(np.int64))
+    q, qd, qdd = trajectory.sample(nanoseconds / 1e9)
+    if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
+        raise ValueError("the trajectory has non-finite samples")
+
+    def row(values: Array) -> str:
+        return "[" + ", ".join(_yaml_float(v) for v in values) + "]"
+
+    lines = [
+        "header: {stamp: {sec: 0, nanosec: 0}, frame_id: \"\"}",
+        "joint_names: [" + ", ".join(json.dumps(n) for n in names) + "]",
+        "points:",
+    ]
+    for k, ns in enumerate(nanoseconds.tolist()):
+        lines += [
+            f"  - positions: {row(q[k])}",
+            f"    velocities: {row(qd[k])}",
+            f"    accelerations: {row(qdd[k])}",
+            "    effort: []",
+            f"    time_from_start: {{sec: {ns // 1_000_000_000}, nanosec: {ns % 1_000_000_000}}}",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def write_joint_trajectory(
+    path: str | Path, trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float
+) -> Path:
+    """Write :func:`joint_trajectory_text` to ``path``; returns the path."""
+    out = Path(path)
+    out.write_text(joint_trajectory_text(trajectory, joint_names, rate_hz))
+    return out
+
+
+def read_joint_trajectory(path: str | Path, *, landmark_intervals: ArrayLike | None = None) -> Trajectory:
+    """Read a ``trajectory_msgs/JointTrajectory`` YAML file (as :func:`write_joint_trajectory` writes)
+    into a :class:`Trajectory` joining its points by quintic Hermite polynomials
+    (:meth:`Trajectory.from_points`), which reproduces positions, velocities and accelerations at every
+    point. ``landmark_intervals`` restores the dwells (the message does not hold them).
+
+    Raises ValueError naming what is missing or malformed.
+    """
+    path = Path(path)
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+    with path.open() as f:
+        doc = yaml.load(f, Loader=loader)  # noqa: S506 - a safe loader
+    if not isinstance(doc, dict) or "joint_names" not in doc or "points" not in doc:
+        raise ValueError(f"{path}: expected a JointTrajectory with joint_names and points")
+    names = [str(n) for n in doc["joint_names"]]
+    points = doc["points"]
+    if not isinstance(points, list) or len(points) < 2:
+        raise ValueError(f"{path}: points must be a list of at least two points")
+    fields = ("positions", "velocities", "accelerations")
+    try:
+        ns = [int(p["time_from_start"]["sec"]) * 1_000_000_000 + int(p["time_from_start"]["nanosec"]) for p in points]
+        t = np.array(ns, float) / 1e9  # as the writer computed the times it sampled
+        q, qd, qdd = (np.array([p[f] for p in points], float) for f in fields)
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(
+            f"{path}: every point needs {', '.join(fields)} and time_from_start {{sec, nanosec}} ({e})"
+        ) from None
+    if q.ndim != 2 or q.shape[1] != len(names):
+        raise ValueError(f"{path}: every point needs {len(names)} positions, velocities and accelerations")
+    return Trajectory.from_points(t, q, qd, qdd, joint_names=names, landmark_intervals=landmark_intervals)
+
+
+def write_captures(
+    path: str | Path,
+    trajectory: Trajectory,
+    *,
+    settle_s: float,
+    image_pattern: str,
+    light_directions_camera: ArrayLike,
+    light_positions: ArrayLike,
+    joint_names: Sequence[str],
+) -> Path:
+    """Write captures.csv (module docstring): one row per dwell of ``trajectory``; the trigger is the
+    dwell's start plus ``settle_s`` (0 ≤ settle_s < each dwell's length), the joint angles are the
+    trajectory's at the trigger. Directions (unit, camera frame) and positions (m, world) per capture."""
+    intervals = trajectory.landmark_intervals
+    m = intervals.shape[0]
+    directions = np.asarray(light_directions_camera, float).reshape(-1, 3)
+    positions = np.asarray(light_positions, float).reshape(-1, 3)
+    if directions.shape[0] != m or positions.shape[0] != m:
+        raise ValueError(f"expected {m} light directions and positions, one per capture")
+    lengths = intervals[:, 1] - intervals[:, 0]
+    if not (settle_s >= 0 and np.all(settle_s < lengths)):
+        raise ValueError(f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell ({lengths.min():.6g} s)")
+    names = image_names(image_pattern, m)
+    trigger = intervals[:, 0] + settle_s
+    q = trajectory.sample(trigger)[0] if m else np.zeros((0, len(joint_names)))
+    header = (
+        ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image"]
+        + [f"light_dir_camera_{a}" for a in "xyz"]
+        + [f"light_position_{a}_m" for a in "xyz"]
+        + [f"q_{n}" for n in joint_names]
+    )
+    out = Path(path)
+    with out.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        for i in range(m):
+            writer.writerow(
+                [i, *(f"{x:.9f}" for x in (*intervals[i], trigger[i])), names[i]]
+                + [f"{x:.12g}" for x in (*directions[i], *positions[i], *q[i])]
+            )
+    return out
 
 
 def write_json(path: str | Path, data: Any) -> Path:

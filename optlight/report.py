@@ -5,7 +5,8 @@ their joint angles, the path, the trajectory NLP, the timed trajectory, the veri
 :class:`~optlight.plan.Plan`, which sits above this module. ``save_results(folder, ...)`` writes, all
 at once or not at all (:func:`optlight.export.write_results`):
 
-- ``trajectory.csv``, ``plan.json``, ``lights.lp`` (relight / PTM light directions);
+- ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
+  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers).
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.export import write_results
+from optlight.export import write_captures, write_joint_trajectory, write_results
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
@@ -59,6 +60,7 @@ def plan_dict(
             "upper": robot.upper,
             "velocity_limit": setup.limits.velocity,
             "acceleration_limit": setup.limits.acceleration,
+            "jerk_limit": setup.limits.jerk,
         },
         "landmarks": [
             {
@@ -129,6 +131,8 @@ def report_markdown(
         f"| joint path length (NLP / per-knot IK) | {s['joint_path_length_rad']:.3f} rad / "
         f"{s['knot_ik_path_length_rad']:.3f} rad |",
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
+        f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
+        f"{setup.trajectory_spec.rate_hz:g} Hz |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
@@ -202,7 +206,32 @@ def save_results(
         out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
         return [out]
 
-    writers = [landmark_figures, *([preview_html] if preview is not None else []), report]
+    traj_spec = setup.trajectory_spec
+
+    def joint_trajectory(folder: Path) -> list[Path]:
+        out = folder / "joint_trajectory.yaml"
+        return [write_joint_trajectory(out, trajectory, robot.joint_names, traj_spec.rate_hz)]
+
+    def captures(folder: Path) -> list[Path]:
+        return [
+            write_captures(
+                folder / "captures.csv",
+                trajectory,
+                settle_s=traj_spec.settle_s,
+                image_pattern=traj_spec.image_pattern,
+                light_directions_camera=light_directions_camera,
+                light_positions=np.array([lm.position for lm in visited]),
+                joint_names=robot.joint_names,
+            )
+        ]
+
+    writers = [
+        landmark_figures,
+        joint_trajectory,
+        captures,
+        *([preview_html] if preview is not None else []),
+        report,
+    ]
     return write_results(
         folder,
         trajectory=trajectory,
@@ -214,4 +243,5 @@ def save_results(
         figures=figures,
         writers=writers,
         overwrite=overwrite,
+        csv_rate_hz=traj_spec.rate_hz,
     )

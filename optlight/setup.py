@@ -51,17 +51,25 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class MotionLimits:
     """The joint limits a plan keeps, per joint: position ``lower``/``upper`` (rad or m),
-    ``velocity`` (the URDF's times ``[robot] velocity_scale``, rad/s) and ``acceleration`` (rad/s²)."""
+    ``velocity`` (the robot's times ``[robot] velocity_scale``, rad/s), ``acceleration`` (rad/s²) and
+    ``jerk`` (rad/s³)."""
 
     lower: Array
     upper: Array
     velocity: Array
     acceleration: Array
+    jerk: Array
 
     @classmethod
     def of(cls, robot: Robot, velocity_scale: float) -> MotionLimits:
         """The limits of ``robot`` with its velocity limits scaled by ``velocity_scale`` ∈ (0, 1]."""
-        return cls(robot.lower, robot.upper, robot.velocity_limit * velocity_scale, robot.acceleration_limit)
+        return cls(
+            robot.lower,
+            robot.upper,
+            robot.velocity_limit * velocity_scale,
+            robot.acceleration_limit,
+            robot.jerk_limit,
+        )
 
 
 @dataclass(frozen=True, eq=False)

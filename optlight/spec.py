@@ -150,6 +150,16 @@ class LightSpec:
     clip_sharpness: float = key(
         60.0, "sharpness of the smooth saturation clip in the differentiable model", lo=0.0, lo_open=True
     )
+    housing: Literal["cylinder", "sphere"] = key(
+        "cylinder",
+        "shape of the light's housing behind its emitting face (the exact view check casts rays against it)",
+    )
+    housing_radius_m: float = key(
+        0.03, "radius of the light housing (a small LED head)", unit="m", lo=0.0, lo_open=True
+    )
+    housing_length_m: float = key(
+        0.06, "length of a cylindrical housing along the light's −z", unit="m", lo=0.0, lo_open=True
+    )
 
 
 @dataclass(frozen=True)
@@ -167,8 +177,19 @@ class RobotSpec:
     light_rpy_deg: Vec3 = key(
         (0.0, 0.0, 0.0), "light frame roll, pitch, yaw in the flange frame (light emits along +z)", unit="deg"
     )
-    acceleration_limit: float | None = key(
-        None, "joint acceleration limit, all joints (default: per robot)", unit="rad/s²", lo=0.0, lo_open=True
+    acceleration_limit: float | tuple[float, ...] | None = key(
+        None,
+        "joint acceleration limit: one for all joints or a list per joint (default: per robot)",
+        unit="rad/s²",
+        lo=0.0,
+        lo_open=True,
+    )
+    jerk_limit: float | tuple[float, ...] | None = key(
+        None,
+        "joint jerk limit: one for all joints or a list per joint (default: per robot)",
+        unit="rad/s³",
+        lo=0.0,
+        lo_open=True,
     )
     velocity_scale: float = key(
         1.0, "fraction of the URDF velocity limits the plan may use", lo=0.0, hi=1.0, lo_open=True
@@ -270,7 +291,26 @@ class TrajectorySpec:
     )
     max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
     dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
-    image_pattern: str = key("img_{index:03d}.png", "image file names written into lights.lp")
+    image_pattern: str = key("img_{index:03d}.png", "image file names written into lights.lp and captures.csv")
+    timing: Literal["jerk_limited", "toppra"] = key(
+        "jerk_limited",
+        "time each segment with continuous acceleration under the jerk limits, or time-optimally with "
+        "TOPPRA (acceleration steps)",
+    )
+    rate_hz: float = key(
+        1000.0,
+        "controller rate: trajectory.csv and joint_trajectory.yaml are sampled at it, the acceleration "
+        "continuity is checked at it",
+        unit="Hz",
+        lo=0.0,
+        lo_open=True,
+    )
+    settle_s: float = key(
+        0.2,
+        "time from the start of a dwell to the camera trigger (must be shorter than dwell_s)",
+        unit="s",
+        lo=0.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -569,6 +609,13 @@ def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
     args = typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
         inner = [a for a in args if a is not type(None)]
+        # ``float | tuple[float, ...]``: a TOML list is the per-item form, anything else the scalar
+        lists = [a for a in inner if typing.get_origin(a) is tuple]
+        scalars = [a for a in inner if typing.get_origin(a) is not tuple]
+        if lists and scalars:
+            if isinstance(value, list):
+                return _convert(lists[0], value, meta, where, file)
+            return _convert(scalars[0], value, meta, where, file)
         return _convert(inner[0], value, meta, where, file)
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return _build(tp, value, where, file)
@@ -693,6 +740,29 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+    traj = p.trajectory
+    if traj.settle_s >= traj.dwell_s:
+        raise ProblemError(
+            file,
+            "trajectory.settle_s",
+            f"a settle time shorter than the dwell (trajectory.dwell_s = {traj.dwell_s:g} s)",
+            traj.settle_s,
+        )
+    light = p.light
+    if light.housing_radius_m >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "light.housing_radius_m",
+            f"a housing smaller than the light sphere (< light_sphere.radius_m = {ls.radius_m:g} m)",
+            light.housing_radius_m,
+        )
+    if light.housing == "cylinder" and light.housing_length_m >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "light.housing_length_m",
+            f"a housing shorter than the light sphere radius (< {ls.radius_m:g} m)",
+            light.housing_length_m,
+        )
     _check_lightset(p, file)
 
 

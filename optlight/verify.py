@@ -13,10 +13,20 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
 - ``path`` (when a planned path is given): distance from every sampled light position to the
   polyline of planned light positions ≤ path_m;
+- with a jerk limit: ``jerk``: |q⃛_j| ≤ j_max,j (1 + limit_rel) (the trajectory's own q⃛), and
+  ``acceleration_continuity``: on the controller's grid t_k = k / rate_hz, the largest jump
+  |q̈_j(t_{k+1}) − q̈_j(t_k)| relative to what the jerk limit allows in one step, j_max,j / rate_hz
+  (a step of q̈, as TOPPRA's parametrization has, shows as a ratio far above 1);
+- with a view check (:class:`optlight.environment.view.ViewCheck`, exact ray casting at the captures):
+  ``view`` (camera rays to the object blocked by a robot link or the light housing) and ``beam``
+  (light rays to the object blocked by a robot link), each the largest blocked fraction of a
+  capture's rays (any blocked ray fails);
 - with an environment check (exact coal distances, :meth:`optlight.environment.Environment.check`):
   ``clearance`` (robot to obstacles), ``self_collision`` (robot to itself) and ``view_cone`` (robot
   and light out of the camera's view of the object), each the allowed distance minus the smallest
   distance over its pairs of bodies (m; positive = too close).
+
+Checks named in ``advisory`` are computed and reported but do not decide :attr:`VerificationReport.passed`.
 
 A NaN anywhere (a broken trajectory or forward kinematics) fails the check it enters. A violation is
 recorded per *episode* (a run of consecutive failing samples of one joint or one
@@ -45,6 +55,9 @@ LightPose = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 #: (q samples (T, n), times (T,), capture times) -> an EnvironmentReport (duck-typed: ``pairs`` and
 #: ``violations`` as in :mod:`optlight.environment.check`).
 EnvironmentCheck = Callable[[np.ndarray, np.ndarray, np.ndarray], Any]
+#: (joint angles at the captures (M, n), capture times (M,)) -> a ViewReport (duck-typed: ``captures``
+#: with ``view_blocked``, ``view_body``, ``view_bodies``, ``beam_*``, ``capture``, ``time_s``).
+ViewCheck = Callable[[np.ndarray, np.ndarray], Any]
 
 #: Check names of the environment pair kinds.
 ENVIRONMENT_CHECKS = {"obstacle": "clearance", "self": "self_collision", "view": "view_cone"}
@@ -116,11 +129,12 @@ class VerificationReport:
     tolerances: Tolerances
     skipped: tuple[str, ...] = ()
     elapsed_s: float = 0.0
+    advisory: tuple[str, ...] = ()
 
     @property
     def passed(self) -> bool:
-        """Every check passed."""
-        return all(c.passed for c in self.checks.values())
+        """Every check passed, the advisory ones aside."""
+        return all(c.passed for name, c in self.checks.items() if name not in self.advisory)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -142,6 +156,7 @@ class VerificationReport:
             "elapsed_s": self.elapsed_s,
             "tolerances": asdict(self.tolerances),
             "skipped": list(self.skipped),
+            "advisory": list(self.advisory),
             "counts": self.counts,
             "checks": {k: {**json_safe(c), "passed": c.passed} for k, c in self.checks.items()},
             "violations": json_safe(self.violations),
@@ -160,12 +175,16 @@ class VerificationReport:
             if c.time_s is not None:
                 where = f" at t = {c.time_s:.4f} s" + (f" ({c.joint})" if c.joint else "")
             unit = f" {c.unit}" if c.unit else ""
+            mark = "ok  " if c.passed else ("warn" if name in self.advisory else "FAIL")
             lines.append(
-                f"  {'ok  ' if c.passed else 'FAIL'} {name:<{width}}  {c.measure} = {c.max_value:.6g}{unit}{where}; "
+                f"  {mark} {name:<{width}}  {c.measure} = {c.max_value:.6g}{unit}{where}; "
                 f"limit {c.limit:.6g}{unit}; {c.failing_samples}/{c.samples} samples over in {c.episodes} episodes"
             )
         for name in self.skipped:
             lines.append(f"  skip {name:<{width}}  not checked")
+        for name in self.advisory:
+            if name in self.checks:
+                lines.append(f"  note {name:<{width}}  reported only: it does not decide the verdict")
         if self.violations:
             lines.append(f"Violations (first {MAX_EPISODES} episodes per check):")
             lines.extend(f"  {v.check}: {v.message}" for v in self.violations)
@@ -190,6 +209,9 @@ def verify_trajectory(
     landmark_positions: ArrayLike,
     planned_path: ArrayLike | None = None,
     environment: EnvironmentCheck | None = None,
+    jerk_limit: ArrayLike | None = None,
+    view: ViewCheck | None = None,
+    advisory: tuple[str, ...] = (),
     rate_hz: float = 1000.0,
     tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
 ) -> VerificationReport:
@@ -206,7 +228,11 @@ def verify_trajectory(
         planned_path: (K, 3) light positions (m, world) along the planned path, or None to skip the
             path check.
         environment: exact clearance / self-collision / view-cone check of the samples, or None.
-        rate_hz: resampling rate, at least 1000 Hz.
+        jerk_limit: (n,) positive jerk limits (rad/s³), or None to skip the jerk and acceleration
+            continuity checks (a TOPPRA-timed trajectory has no bounded jerk).
+        view: exact view and beam check at the captures, or None to skip it.
+        advisory: names of checks reported without deciding the verdict.
+        rate_hz: resampling rate, at least 1000 Hz; also the controller grid of the continuity check.
         tol: the tolerances.
     """
     start = time.perf_counter()
@@ -264,6 +290,15 @@ def verify_trajectory(
 
     rate_check("velocity", "q̇", qd, vmax, "rad/s")
     rate_check("acceleration", "q̈", qdd, amax, "rad/s²")
+    skipped: tuple[str, ...] = ()
+    if jerk_limit is not None:
+        jmax = _per_joint(jerk_limit, n, "jerk_limit")
+        if not (jmax > 0).all():
+            raise ValueError("jerk limits must be positive")
+        rate_check("jerk", "q⃛", trajectory.jerk(t), jmax, "rad/s³")
+        _continuity_check(collector, trajectory, jmax, rate_hz, tol, names)
+    else:
+        skipped = ("jerk", "acceleration_continuity")
 
     # Light at the landmarks, throughout each dwell.
     dwell_of = np.full(t.size, -1)
@@ -303,7 +338,6 @@ def verify_trajectory(
     dwell_check("aim", aim[in_dwell], tol.aim_rad, "rad", "aiming angle")
     dwell_check("landmark", landmark_dist, tol.landmark_m, "m", "distance to the landmark")
 
-    skipped: tuple[str, ...] = ()
     if planned_path is not None:
         polyline = np.asarray(planned_path, float).reshape(-1, 3)
         if polyline.shape[0] == 0:
@@ -321,9 +355,14 @@ def verify_trajectory(
             ),
         )
     else:
-        skipped = ("path",)
+        skipped += ("path",)
     if environment is not None:
         _environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
+    if view is not None:
+        captures = trajectory.capture_times
+        _view_checks(collector, view(trajectory.sample(captures)[0], captures))
+    else:
+        skipped += ("view", "beam")
 
     return VerificationReport(
         checks=collector.checks,
@@ -334,7 +373,75 @@ def verify_trajectory(
         tolerances=tol,
         skipped=skipped,
         elapsed_s=time.perf_counter() - start,
+        advisory=tuple(a for a in advisory if a in collector.checks),
     )
+
+
+def _continuity_check(
+    collector: _Collector, trajectory: Trajectory, jmax: Array, rate_hz: float, tol: Tolerances, names: list[str]
+) -> None:
+    """``acceleration_continuity`` on the controller grid t_k = k / rate_hz: the ratio of each jump
+    |q̈_j(t_{k+1}) − q̈_j(t_k)| to j_max,j Δt_k (Δt_k = 1 / rate_hz but the last), recorded at t_{k+1}."""
+    grid = np.arange(int(np.floor(trajectory.duration * rate_hz + 1e-9)) + 1) / rate_hz
+    if grid[-1] < trajectory.duration - 1e-12:
+        grid = np.append(grid, trajectory.duration)
+    if grid.size < 2:
+        return
+    qdd = trajectory.sample(grid)[2]
+    jump = np.abs(np.diff(qdd, axis=0))
+    allowed = jmax * np.diff(grid)[:, None]
+    ratio = jump / allowed
+    sample_times, collector.t = collector.t, grid[1:]  # this check's samples are the controller grid
+    collector.joint_check(
+        "acceleration_continuity",
+        "largest |Δq̈_j| / (jerk_limit_j Δt) between controller samples",
+        "",
+        ratio,
+        np.full(jmax.size, 1.0 + tol.limit_rel),
+        lambda j, k: (
+            f"joint {names[j]}: q̈ jumps by {jump[k, j]:.6g} rad/s² between t = {grid[k]:.4f} and "
+            f"{grid[k + 1]:.4f} s, {ratio[k, j]:.3g}× what jerk_limit {jmax[j]:.6g} rad/s³ allows"
+        ),
+        value=lambda j, k: jump[k, j],
+        limit=lambda j, k: allowed[k, j] * (1 + tol.limit_rel),
+    )
+    collector.t = sample_times
+
+
+def _view_checks(collector: _Collector, report: Any) -> None:
+    """``view`` and ``beam``: the largest blocked fraction of a capture's rays (limit 0); every
+    blocked capture is a violation naming the capture, the first blocking body and the time."""
+    for name, what in (("view", "the camera's rays to the object"), ("beam", "the light's rays to the object")):
+        fractions = [getattr(c, f"{name}_blocked") for c in report.captures]
+        blocked = [c for c in report.captures if getattr(c, f"{name}_blocked") > 0]
+        worst = max(report.captures, key=lambda c: getattr(c, f"{name}_blocked"), default=None)
+        collector.checks[name] = CheckResult(
+            name=name,
+            measure=f"largest blocked fraction of {what} at a capture",
+            unit="",
+            max_value=max(fractions, default=0.0),
+            limit=0.0,
+            time_s=worst.time_s if worst is not None else None,
+            joint=getattr(worst, f"{name}_body") if worst is not None else None,
+            failing_samples=len(blocked),
+            episodes=len(blocked),
+            samples=len(fractions),
+        )
+        for c in blocked[:MAX_EPISODES]:
+            bodies = getattr(c, f"{name}_bodies")
+            others = f" (also {', '.join(bodies[1:])})" if len(bodies) > 1 else ""
+            fraction = getattr(c, f"{name}_blocked")
+            collector.violations.append(
+                Violation(
+                    name,
+                    c.time_s,
+                    bodies[0],
+                    fraction,
+                    0.0,
+                    f"capture {c.capture} at t = {c.time_s:.4f} s: {fraction:.1%} of {what} blocked, "
+                    f"first by {bodies[0]}{others}",
+                )
+            )
 
 
 def _environment_checks(collector: _Collector, report: Any, samples: int) -> None:

@@ -222,3 +222,137 @@ def test_trajectory_figure_file(tmp_path) -> None:
         tmp_path / "t.png", traj, lower=LOWER, upper=UPPER, velocity_limit=VMAX, acceleration_limit=AMAX
     )
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+# ---------------------------------------------------------------- joint_trajectory.yaml, captures.csv
+
+JMAX = np.array([20.0, 30.0])
+
+
+def jerk_plan() -> Trajectory:
+    from optlight.planning.jerk import jerk_limited_timing
+
+    s = np.linspace(0, 1, 6)[:, None]
+    segments = [a + (b - a) * s for a, b in zip(LANDMARKS_Q[:-1], LANDMARKS_Q[1:], strict=True)]
+    return jerk_limited_timing(segments, VMAX, AMAX, JMAX, 0.3, joint_names=NAMES)
+
+
+def test_joint_trajectory_yaml_is_a_plain_ros_message_and_reads_back_to_1e_9(tmp_path) -> None:
+    import yaml
+
+    from optlight.export import read_joint_trajectory, write_joint_trajectory
+
+    traj = jerk_plan()
+    path = write_joint_trajectory(tmp_path / "joint_trajectory.yaml", traj, NAMES, 250.0)
+    doc = yaml.safe_load(path.read_text())  # a plain YAML reader, no optlight involved
+    assert doc["joint_names"] == NAMES and doc["header"]["stamp"] == {"sec": 0, "nanosec": 0}
+    points = doc["points"]
+    assert all(set(p) == {"positions", "velocities", "accelerations", "effort", "time_from_start"} for p in points)
+    assert all(isinstance(p["time_from_start"]["nanosec"], int) for p in points)
+    t = np.array([p["time_from_start"]["sec"] * 10**9 + p["time_from_start"]["nanosec"] for p in points]) / 1e9
+    assert t[0] == 0.0 and np.all(np.diff(t) > 0) and t[-1] == pytest.approx(traj.duration, abs=1e-9)
+    assert np.all(np.isin(np.round(traj.boundaries, 9), np.round(t, 9)))  # every dwell start and end
+    for key, value in zip(("positions", "velocities", "accelerations"), traj.sample(t), strict=True):
+        np.testing.assert_array_equal(np.array([p[key] for p in points]), value)  # exact floats
+
+    back = read_joint_trajectory(path, landmark_intervals=traj.landmark_intervals)
+    assert back.joint_names == tuple(NAMES) and back.duration == pytest.approx(traj.duration, abs=1e-9)
+    for original, read in zip(traj.sample(t), back.sample(t), strict=True):
+        np.testing.assert_allclose(read, original, rtol=0, atol=1e-9)
+    # between the points the quintic stays close to the jerk-limited motion (4 ms apart here)
+    mid = 0.5 * (t[1:] + t[:-1])
+    np.testing.assert_allclose(back.sample(mid)[0], traj.sample(mid)[0], atol=1e-6)
+
+
+def test_quintic_points_reproduce_a_quintic_exactly() -> None:
+    rng = np.random.default_rng(5)
+    c = rng.normal(size=(6, 2))  # q(t) = Σ c_k t^k on [0, 2]
+
+    def poly(t: np.ndarray, d: int) -> np.ndarray:
+        k = np.arange(6)
+        coef = np.array([np.prod(np.arange(i - d + 1, i + 1)) if i >= d else 0.0 for i in k])
+        powers = np.where(k >= d, t[:, None] ** np.maximum(k - d, 0), 0.0)
+        return (powers * coef) @ c
+
+    t = np.array([0.0, 0.3, 1.1, 2.0])
+    traj = Trajectory.from_points(t, poly(t, 0), poly(t, 1), poly(t, 2))
+    dense = np.linspace(0.0, 2.0, 301)
+    for value, d in zip(traj.sample(dense), (0, 1, 2), strict=True):
+        np.testing.assert_allclose(value, poly(dense, d), atol=1e-10)
+    np.testing.assert_allclose(traj.jerk(dense), poly(dense, 3), atol=1e-8)
+
+
+def test_unreadable_joint_trajectories_are_named(tmp_path) -> None:
+    from optlight.export import read_joint_trajectory
+
+    path = tmp_path / "bad.yaml"
+    path.write_text("joint_names: [a]\npoints:\n  - {positions: [0.0]}\n  - {positions: [1.0]}\n")
+    with pytest.raises(ValueError, match="time_from_start"):
+        read_joint_trajectory(path)
+    path.write_text("points: []\n")
+    with pytest.raises(ValueError, match="joint_names and points"):
+        read_joint_trajectory(path)
+
+
+def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_path) -> None:
+    from optlight.export import write_captures
+
+    traj = jerk_plan()
+    positions = SPHERE.position(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1])
+    path = write_captures(
+        tmp_path / "captures.csv",
+        traj,
+        settle_s=0.2,
+        image_pattern="cap_{index:02d}.png",
+        light_directions_camera=directions(),
+        light_positions=positions,
+        joint_names=NAMES,
+    )
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    assert [int(r["capture"]) for r in rows] == list(range(len(LANDMARKS_Q)))
+    assert [r["image"] for r in rows] == image_names("cap_{index:02d}.png", len(LANDMARKS_Q))
+    for row, (a, b), p, q in zip(rows, traj.landmark_intervals, positions, LANDMARKS_Q, strict=True):
+        trigger = float(row["trigger_s"])
+        assert float(row["dwell_start_s"]) == pytest.approx(a, abs=1e-9)
+        assert trigger == pytest.approx(a + 0.2, abs=1e-9) and a < trigger < b
+        # the joints are still around the trigger, and the file's joint angles are the landmark's
+        _, qd, _ = traj.sample(np.linspace(trigger - 1e-3, trigger + 1e-3, 11))
+        assert np.abs(qd).max() < 1e-9
+        np.testing.assert_allclose([float(row[f"q_{n}"]) for n in NAMES], q, atol=1e-9)
+        np.testing.assert_allclose([float(row[f"light_position_{x}_m"]) for x in "xyz"], p, atol=1e-9)
+    with pytest.raises(ValueError, match="settle_s"):
+        write_captures(
+            tmp_path / "again.csv",
+            traj,
+            settle_s=0.3,
+            image_pattern="x{index}",
+            light_directions_camera=directions(),
+            light_positions=positions,
+            joint_names=NAMES,
+        )
+
+
+def test_verification_flags_acceleration_steps_and_names_joint_and_time() -> None:
+    traj = jerk_plan()
+    args = dict(
+        light_pose=light_pose,
+        lower=LOWER,
+        upper=UPPER,
+        velocity_limit=VMAX,
+        acceleration_limit=AMAX,
+        sphere=SPHERE,
+        landmark_positions=SPHERE.position(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1]),
+        jerk_limit=JMAX,
+    )
+    report = verify_trajectory(traj, **args)
+    assert report.passed, report.summary()
+    assert report.checks["acceleration_continuity"].max_value <= 1 + 1e-6
+    assert report.checks["jerk"].max_value <= 1 + 1e-9
+    toppra, _ = plan()  # the same landmarks timed by TOPPRA: q̈ steps at its gridpoints
+    bad = verify_trajectory(toppra, **args)
+    assert not bad.passed and bad.counts["acceleration_continuity"] > 0
+    v = next(v for v in bad.violations if v.check == "acceleration_continuity")
+    assert v.joint in NAMES and "q̈ jumps by" in v.message and f"t = {v.time_s - 1e-3:.4f}" in v.message
+    # skipped when no jerk limit is given (a TOPPRA plan verified as before)
+    assert "acceleration_continuity" in verify_trajectory(toppra, **{**args, "jerk_limit": None}).skipped

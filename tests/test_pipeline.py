@@ -127,3 +127,63 @@ def test_a_single_landmark_is_one_dwell(tmp_path: Path) -> None:
     assert plan.trajectory.duration == pytest.approx(plan.problem.trajectory.dwell_s)
     plan.save(tmp_path / "one", preview=False)
     assert (tmp_path / "one" / "lights.lp").read_text().splitlines()[0] == "1"
+
+
+def test_the_view_check_runs_on_every_plan_and_a_blocked_capture_is_refused(
+    plan: optlight.Plan, tmp_path: Path
+) -> None:
+    from optlight.environment.view import view_check_for
+
+    # runs without [environment]: reported (advisory until the planner keeps the view clear)
+    assert not plan.problem.environment.enabled
+    assert {"view", "beam"} <= set(plan.verification.checks)
+    assert plan.verification.advisory == ("view", "beam")
+    # enforced, a blocked capture fails the plan, names capture, link and time, and nothing is written
+    robot = plan.robot
+    report = verify_trajectory(
+        plan.trajectory,
+        light_pose=robot.light_pose,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=robot.velocity_limit,
+        acceleration_limit=robot.acceleration_limit,
+        sphere=plan.scene.sphere,
+        landmark_positions=np.array([lm.position for lm in plan.visited]),
+        jerk_limit=robot.jerk_limit,
+        view=view_check_for(robot, plan.scene, plan.problem.light).check,
+    )
+    blocked = [v for v in report.violations if v.check == "view"]
+    assert blocked, "the default layout blocks the view at some capture (issue 11)"
+    first = blocked[0]
+    assert first.joint in {g.name for g in robot.model.frames} | {"light housing"}
+    capture = int(first.message.split()[1])
+    assert first.time_s == pytest.approx(plan.trajectory.capture_times[capture])
+    assert f"at t = {first.time_s:.4f} s" in first.message and f"first by {first.joint}" in first.message
+    bad = dataclasses.replace(plan, verification=report)
+    with pytest.raises(VerificationError, match=rf"capture {capture} at t = .* first by {first.joint}"):
+        bad.save(tmp_path / "blocked", preview=False)
+    assert not any(tmp_path.iterdir()), "nothing may be written for a blocked capture"
+
+
+def test_jerk_limited_plan_exports_for_the_controller(plan: optlight.Plan, tmp_path: Path) -> None:
+    from optlight.export import read_joint_trajectory
+
+    checks = plan.verification.checks
+    assert checks["jerk"].passed and checks["acceleration_continuity"].passed
+    folder = tmp_path / "out"
+    plan.save(folder, preview=False)
+    assert {"joint_trajectory.yaml", "captures.csv"} <= {p.name for p in folder.iterdir()}
+    t = np.loadtxt(folder / "trajectory.csv", delimiter=",", skiprows=1, usecols=0)
+    assert np.median(np.diff(t)) == pytest.approx(1.0 / plan.problem.trajectory.rate_hz)
+    back = read_joint_trajectory(folder / "joint_trajectory.yaml")
+    times = np.linspace(0.0, plan.trajectory.duration, 101)
+    np.testing.assert_allclose(back.sample(times)[0], plan.trajectory.sample(times)[0], atol=1e-6)
+    lp = (folder / "lights.lp").read_text().split("\n")[1:-1]
+    captures = (folder / "captures.csv").read_text().splitlines()[1:]
+    assert [line.split()[0] for line in lp] == [row.split(",")[4] for row in captures]
+
+
+def test_toppra_timing_stays_available() -> None:
+    toppra = optlight.solve(small_problem(trajectory={"timing": "toppra"}, landmarks={"count": 3}))
+    assert toppra.verification.passed
+    assert {"jerk", "acceleration_continuity"} <= set(toppra.verification.skipped)

@@ -72,10 +72,12 @@ def test_robot_attributes_are_consistent(name: str) -> None:
     r = robot(name)
     n = r.n
     assert len(r.joint_names) == n and r.model.nv == n
-    for arr in (r.lower, r.upper, r.velocity_limit, r.acceleration_limit, r.theta_ref):
+    for arr in (r.lower, r.upper, r.velocity_limit, r.acceleration_limit, r.jerk_limit, r.theta_ref):
         assert arr.shape == (n,)
     assert np.all(r.lower < r.upper)
-    assert np.all(r.velocity_limit > 0) and np.all(r.acceleration_limit > 0)
+    assert np.all(r.velocity_limit > 0) and np.all(r.acceleration_limit > 0) and np.all(r.jerk_limit > 0)
+    # never faster than the URDF allows
+    assert np.all(r.velocity_limit <= np.asarray(r.model.velocityLimit) + 1e-12)
     assert r.within_limits(r.theta_ref)
     assert r.model.frames[r.light_frame_id].name == "light"
     assert r.light_jacobian(r.theta_ref).shape == (6, n)
@@ -271,3 +273,25 @@ def test_casadi_kinematics_handles_every_joint_type() -> None:
 
 def test_every_robot_name_the_problem_files_accept_loads() -> None:
     assert set(ROBOTS) == set(SUPPORTED_ROBOTS)
+
+
+def test_published_limits_and_problem_overrides() -> None:
+    from optlight.spec import load_problem, problem_from_dict
+
+    panda = robot("panda")  # Franka's published values (DESIGN §7)
+    np.testing.assert_array_equal(panda.acceleration_limit, [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
+    np.testing.assert_array_equal(panda.jerk_limit, 7500.0)
+    np.testing.assert_allclose(robot("ur10").velocity_limit[:2], np.deg2rad(120.0))  # below the URDF's
+    data = load_problem("default").to_dict()
+    data["robot"].update(jerk_limit=[1.0, 2, 3, 4, 5, 6, 7], acceleration_limit=3.0)
+    overridden = load_robot(problem_from_dict(data))
+    np.testing.assert_array_equal(overridden.jerk_limit, [1, 2, 3, 4, 5, 6, 7])
+    np.testing.assert_array_equal(overridden.acceleration_limit, 3.0)
+    data["robot"].update(jerk_limit=[1.0, 2.0])
+    with pytest.raises(RobotError, match=r"robot.jerk_limit: 2 values for the 7 joints"):
+        load_robot(problem_from_dict(data))
+    # a robot without a published jerk: the acceleration limit reached in DEFAULT_JERK_RAMP_S
+    from optlight.robot.loading import DEFAULT_JERK_RAMP_S
+
+    z1 = robot("z1")
+    np.testing.assert_allclose(z1.jerk_limit, z1.acceleration_limit / DEFAULT_JERK_RAMP_S)

@@ -88,6 +88,15 @@ def test_defaults_fill_missing_keys(tmp_path: Path) -> None:
         (lambda d: d["objective"]["terms"][0].update(kind="mean"), "objective.terms[0].target", "target"),
         (lambda d: d["robot"].update(urdf="nowhere.urdf", frame="tool0"), "robot.urdf", "existing URDF"),
         (lambda d: d["robot"].update(name="ur99"), "robot.name", "panda, ur3"),
+        (lambda d: d["trajectory"].update(settle_s=0.5), "trajectory.settle_s", "shorter than the dwell"),
+        (lambda d: d["trajectory"].update(settle_s=0.7), "trajectory.settle_s", "dwell_s = 0.5 s"),
+        (lambda d: d["light"].update(housing_radius_m=0.4), "light.housing_radius_m", "smaller than the light"),
+        (lambda d: d["light"].update(housing_length_m=0.5), "light.housing_length_m", "shorter than the light"),
+        (lambda d: d["light"].update(housing="cube"), "light.housing", "'cylinder', 'sphere'"),
+        (lambda d: d["robot"].update(jerk_limit=[100.0, -1.0]), "robot.jerk_limit[1]", "> 0"),
+        (lambda d: d["robot"].update(jerk_limit="fast"), "robot.jerk_limit", "a finite number"),
+        (lambda d: d["trajectory"].update(rate_hz=0.0), "trajectory.rate_hz", "> 0"),
+        (lambda d: d["trajectory"].update(timing="fast"), "trajectory.timing", "'jerk_limited', 'toppra'"),
     ],
 )
 def test_bad_values_name_file_and_key(tmp_path: Path, mutate, key: str, fragment: str) -> None:
@@ -189,3 +198,12 @@ def test_mutated_problem_files_fail_cleanly(data: st.DataObject) -> None:
         problem_from_dict(mutated)
     except ProblemError as e:
         assert e.key is not None and str(e)
+
+
+def test_limits_take_one_value_or_one_per_joint() -> None:
+    data = load_problem("default").to_dict()
+    data["robot"].update(jerk_limit=[100.0, 200, 300, 400, 500, 600, 700], acceleration_limit=4.0)
+    robot = problem_from_dict(data).robot
+    assert robot.jerk_limit == (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0)
+    assert robot.acceleration_limit == 4.0
+    assert problem_from_dict(problem_from_dict(data).to_dict()).robot == robot

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import csv
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -88,6 +88,10 @@ class _Piece(Protocol):
         """q, q̇, q̈ at local times t ∈ [0, duration], each (T, n)."""
         ...
 
+    def jerk(self, t: Array) -> Array:
+        """q⃛ (T, n) at local times t ∈ [0, duration] (the right-hand value where it jumps)."""
+        ...
+
 
 @dataclass(frozen=True)
 class _Hold:
@@ -99,6 +103,9 @@ class _Hold:
     def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
         q = np.broadcast_to(self.q, (t.size, self.q.size)).copy()
         return q, np.zeros_like(q), np.zeros_like(q)
+
+    def jerk(self, t: Array) -> Array:
+        return np.zeros((t.size, self.q.size))
 
 
 class _Motion:
@@ -137,6 +144,17 @@ class _Motion:
         d1 = self.path(s, 1)
         return self.path(s, 0), d1 * sd[:, None], self.path(s, 2) * (sd**2)[:, None] + d1 * u[:, None]
 
+    def jerk(self, t: Array) -> Array:
+        """q⃛ = q‴(s) ṡ³ + 3 q″(s) ṡ s̈ inside an interval (s⃛ = 0 there; s̈ steps at the gridpoints,
+        where q̈ jumps and q⃛ has an impulse this does not represent)."""
+        i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.u.size - 1)
+        tau = t - self.t[i]
+        u = self.u[i]
+        sd = self.v[i] + u * tau
+        s = np.clip(self.s[i] + self.v[i] * tau + 0.5 * u * tau**2, self.s[0], self.s[-1])
+        d3 = self.path.cspldd.derivative()(s)
+        return d3 * (sd**3)[:, None] + 3 * self.path(s, 2) * (sd * u)[:, None]
+
 
 @dataclass(frozen=True)
 class _Samples:
@@ -158,6 +176,58 @@ class _Samples:
         q, qd, qdd = (a[i] * (1 - w) + a[i + 1] * w for a in (self.q, self.qd, self.qdd))
         return q, qd, qdd
 
+    def jerk(self, t: Array) -> Array:
+        """The slope of the linearly interpolated q̈."""
+        tt = t + self.t[0]
+        i = np.clip(np.searchsorted(self.t, tt, side="right") - 1, 0, self.t.size - 2)
+        return (self.qdd[i + 1] - self.qdd[i]) / (self.t[i + 1] - self.t[i])[:, None]
+
+
+@dataclass(frozen=True)
+class _Quintic:
+    """Points (t_k, q_k, q̇_k, q̈_k) joined by the quintic Hermite polynomial of each interval: the one
+    polynomial of degree 5 with the given q, q̇, q̈ at both ends (what ROS 2's joint_trajectory_controller
+    interpolates when positions, velocities and accelerations are all given). With h = t_{k+1} − t_k,
+    x = (t − t_k)/h ∈ [0, 1] and the end values scaled by h (v = h q̇, a = h² q̈):
+
+        q(x) = q_0 + v_0 x + a_0 x²/2 + c_3 x³ + c_4 x⁴ + c_5 x⁵,
+        c_3 = 10 Δ − 6 v_0 − 4 v_1 − (3 a_0 − a_1)/2,  c_4 = −15 Δ + 8 v_0 + 7 v_1 + (3 a_0 − 2 a_1)/2,
+        c_5 = 6 Δ − 3 (v_0 + v_1) − (a_0 − a_1)/2,    Δ = q_1 − q_0.
+    """
+
+    t: Array
+    q: Array
+    qd: Array
+    qdd: Array
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    def _coefficients(self, t: Array) -> tuple[Array, Array, list[Array]]:
+        tt = t + self.t[0]
+        i = np.clip(np.searchsorted(self.t, tt, side="right") - 1, 0, self.t.size - 2)
+        h = (self.t[i + 1] - self.t[i])[:, None]
+        x = (tt[:, None] - self.t[i][:, None]) / h
+        v0, v1 = self.qd[i] * h, self.qd[i + 1] * h
+        a0, a1 = self.qdd[i] * h**2, self.qdd[i + 1] * h**2
+        d = self.q[i + 1] - self.q[i]
+        c3 = 10 * d - 6 * v0 - 4 * v1 - 0.5 * (3 * a0 - a1)
+        c4 = -15 * d + 8 * v0 + 7 * v1 + 0.5 * (3 * a0 - 2 * a1)
+        c5 = 6 * d - 3 * (v0 + v1) - 0.5 * (a0 - a1)
+        return x, h, [self.q[i], v0, 0.5 * a0, c3, c4, c5]
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        x, h, c = self._coefficients(t)
+        q = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))))
+        qd = c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))
+        qdd = 2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))
+        return q, qd / h, qdd / h**2
+
+    def jerk(self, t: Array) -> Array:
+        x, h, c = self._coefficients(t)
+        return (6 * c[3] + x * (24 * c[4] + x * 60 * c[5])) / h**3
+
 
 @dataclass(frozen=True)
 class _Scaled:
@@ -173,6 +243,9 @@ class _Scaled:
     def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
         q, qd, qdd = self.piece.evaluate(t / self.factor)
         return q, qd / self.factor, qdd / self.factor**2
+
+    def jerk(self, t: Array) -> Array:
+        return self.piece.jerk(t / self.factor) / self.factor**3
 
 
 # --------------------------------------------------------------------------------------------
@@ -251,8 +324,22 @@ class Trajectory:
         """Joint positions q (rad), velocities q̇ (rad/s), accelerations q̈ (rad/s²) at times t (s).
 
         ``t`` is a scalar or a 1-D array in [0, duration]; each result has shape (T, n). At a time
-        where two pieces meet, the later piece is evaluated (q and q̇ are continuous there, q̈ is not).
+        where two pieces meet, the later piece is evaluated (q and q̇ are continuous there; q̈ is too in a
+        jerk-limited trajectory, not in a TOPPRA one).
         """
+        out = self._evaluate(t, lambda piece, local: piece.evaluate(local), 3)
+        return out[0], out[1], out[2]
+
+    def jerk(self, t: ArrayLike) -> Array:
+        """Joint jerks q⃛ (rad/s³), shape (T, n), at times t (s), like :meth:`sample`. A
+        :func:`time_parameterize` (TOPPRA) trajectory gives the value inside its constant-s̈ intervals:
+        its q̈ steps between them, which only an impulse of q⃛ could represent."""
+        return self._evaluate(t, lambda piece, local: (piece.jerk(local),), 1)[0]
+
+    def _evaluate(
+        self, t: ArrayLike, method: Callable[[_Piece, Array], tuple[Array, ...]], count: int
+    ) -> list[Array]:
+        """``count`` (T, n) arrays from ``method(piece, local times)`` of the piece holding each time."""
         times = np.atleast_1d(np.asarray(t, float))
         if times.ndim != 1:
             raise ValueError(f"times must be a scalar or a 1-D array, got shape {times.shape}")
@@ -260,15 +347,15 @@ class Trajectory:
             times.min() < -1e-9 or times.max() > self.duration + 1e-9 or np.isnan(times).any()
         ):
             raise ValueError(f"times must lie in [0, {self.duration:.6g}] s")
-        out = [np.empty((times.size, self._dof)) for _ in range(3)]
+        out = [np.empty((times.size, self._dof)) for _ in range(count)]
         index = np.clip(np.searchsorted(self._starts, times, side="right") - 1, 0, len(self._pieces) - 1)
         for k in np.unique(index):
             sel = index == k
             piece = self._pieces[k]
             local = np.clip(times[sel] - self._starts[k], 0.0, piece.duration)
-            for o, v in zip(out, piece.evaluate(local), strict=True):
+            for o, v in zip(out, method(piece, local), strict=True):
                 o[sel] = v
-        return out[0], out[1], out[2]
+        return out
 
     def time_scaled(self, factor: float) -> Trajectory:
         """The same motion with every time multiplied by ``factor`` (> 0): q_f(t) = q(t/factor),
@@ -340,6 +427,33 @@ class Trajectory:
         segments = np.column_stack([intervals[:-1, 1], intervals[1:, 0]])
         return cls([piece], intervals, segments, names)
 
+    @classmethod
+    def from_points(
+        cls,
+        t: ArrayLike,
+        q: ArrayLike,
+        qd: ArrayLike,
+        qdd: ArrayLike,
+        *,
+        joint_names: Sequence[str] | None = None,
+        landmark_intervals: ArrayLike | None = None,
+    ) -> Trajectory:
+        """The trajectory through points (t_k, q_k, q̇_k, q̈_k) joined by quintic Hermite polynomials
+        (:class:`_Quintic`): it reproduces q, q̇, q̈ at every point. ``t`` (K ≥ 2) starts at 0 and
+        increases strictly; q, q̇, q̈ are (K, n). ``landmark_intervals`` as in :meth:`from_csv`."""
+        times = np.asarray(t, float)
+        arrays = [np.asarray(a, float) for a in (q, qd, qdd)]
+        if times.ndim != 1 or times.size < 2 or abs(times[0]) > 1e-9 or np.any(np.diff(times) <= 0):
+            raise ValueError("point times must start at 0 and increase strictly (at least two points)")
+        if any(a.ndim != 2 or a.shape != arrays[0].shape or a.shape[0] != times.size for a in arrays):
+            raise ValueError(f"positions, velocities and accelerations must be ({times.size}, n) arrays")
+        if not all(np.isfinite(a).all() for a in arrays):
+            raise ValueError("positions, velocities and accelerations must be finite")
+        intervals = np.zeros((0, 2)) if landmark_intervals is None else np.asarray(landmark_intervals, float)
+        intervals = intervals.reshape(-1, 2)
+        segments = np.column_stack([intervals[:-1, 1], intervals[1:, 0]])
+        return cls([_Quintic(times, *arrays)], intervals, segments, joint_names)
+
 
 def _distinct(times: Array, tol: float = TIME_RESOLUTION) -> Array:
     """Sorted times with values closer than ``tol`` merged (the earliest kept)."""
@@ -394,6 +508,56 @@ def time_parameterize(
         SolverError: TOPPRA failed on a segment (its index and TOPPRA's return code are named), or
             the limits could not be kept between gridpoints after refinement.
     """
+    def segment(index: int, waypoints: Array, n: int) -> _Piece | None:
+        vmax = positive_limits(velocity_limit, n, "velocity_limit")
+        amax = positive_limits(acceleration_limit, n, "acceleration_limit")
+        return _time_segment(index, waypoints, vmax, amax, gridpoints)
+
+    if gridpoints is not None and gridpoints < 2:
+        raise ValueError(f"gridpoints must be at least 2, got {gridpoints}")
+    n = _check_segments(segments)[1]
+    positive_limits(velocity_limit, n, "velocity_limit")
+    positive_limits(acceleration_limit, n, "acceleration_limit")
+    return assemble_trajectory(segments, dwell_s, segment, joint_names)
+
+
+#: time_segment(segment index, waypoints (K, n), n) -> the motion along the segment, rest to rest, or
+#: None for a segment whose waypoints all coincide.
+SegmentTiming = Callable[[int, Array, int], "_Piece | None"]
+
+
+def assemble_trajectory(
+    segments: Sequence[ArrayLike],
+    dwell_s: float,
+    time_segment: SegmentTiming,
+    joint_names: Sequence[str] | None = None,
+) -> Trajectory:
+    """Check the segments (see :func:`time_parameterize`) and join dwell, motion, dwell, …, dwell:
+    ``time_segment`` times each segment from rest to rest."""
+    waypoints, n, lone = _check_segments(segments)
+    if not (np.isfinite(dwell_s) and dwell_s >= 0):
+        raise ValueError(f"dwell_s must be a finite non-negative number, got {dwell_s}")
+    pieces: list[_Piece] = [_Hold(waypoints[0][0], float(dwell_s))]
+    intervals = [(0.0, float(dwell_s))]
+    if lone:
+        return Trajectory(pieces, intervals, [], joint_names)
+    seg_times = []
+    t = float(dwell_s)
+    for i, w in enumerate(waypoints):
+        motion = time_segment(i, w, n)
+        if motion is not None:
+            pieces.append(motion)
+        start, t = t, t + (motion.duration if motion is not None else 0.0)
+        seg_times.append((start, t))
+        pieces.append(_Hold(w[-1], float(dwell_s)))
+        intervals.append((t, t + dwell_s))
+        t += dwell_s
+    return Trajectory(pieces, intervals, seg_times, joint_names)
+
+
+def _check_segments(segments: Sequence[ArrayLike]) -> tuple[list[Array], int, bool]:
+    """The segments as (K_i, n) arrays, n, and whether they are a single landmark (one (1, n) array);
+    ValueError for bad shapes, non-finite values, or segments that do not join."""
     waypoints = [np.asarray(s, float) for s in segments]
     if not waypoints:
         raise ValueError("at least one segment is needed")
@@ -411,39 +575,18 @@ def time_parameterize(
                 f"segment {i} ends at {waypoints[i][-1]} but segment {i + 1} starts at "
                 f"{waypoints[i + 1][0]} (gap {gap:.3g} rad)"
             )
-    vmax = _positive_limits(velocity_limit, n, "velocity_limit")
-    amax = _positive_limits(acceleration_limit, n, "acceleration_limit")
-    if not (np.isfinite(dwell_s) and dwell_s >= 0):
-        raise ValueError(f"dwell_s must be a finite non-negative number, got {dwell_s}")
-    if gridpoints is not None and gridpoints < 2:
-        raise ValueError(f"gridpoints must be at least 2, got {gridpoints}")
-
-    pieces: list[_Piece] = [_Hold(waypoints[0][0], float(dwell_s))]
-    intervals = [(0.0, float(dwell_s))]
-    if lone:
-        return Trajectory(pieces, intervals, [], joint_names)
-    seg_times = []
-    t = float(dwell_s)
-    for i, w in enumerate(waypoints):
-        motion = _time_segment(i, w, vmax, amax, gridpoints)
-        if motion is not None:
-            pieces.append(motion)
-        start, t = t, t + (motion.duration if motion is not None else 0.0)
-        seg_times.append((start, t))
-        pieces.append(_Hold(w[-1], float(dwell_s)))
-        intervals.append((t, t + dwell_s))
-        t += dwell_s
-    return Trajectory(pieces, intervals, seg_times, joint_names)
+    return waypoints, n, lone
 
 
-def _positive_limits(value: ArrayLike, n: int, name: str) -> Array:
+def positive_limits(value: ArrayLike, n: int, name: str) -> Array:
+    """(n,) finite positive limits from one value or n; ValueError naming ``name`` otherwise."""
     lim = np.asarray(value, float)
     if lim.shape not in ((), (n,)) or not (np.isfinite(lim).all() and (lim > 0).all()):
         raise ValueError(f"{name} must be one or {n} finite positive numbers, got {lim}")
     return np.broadcast_to(lim, (n,)).copy()
 
 
-def _chord_path(waypoints: Array) -> tuple[Array, Array] | None:
+def chord_path(waypoints: Array) -> tuple[Array, Array] | None:
     """Waypoints with near-duplicates merged and their cumulative chord parameter s (rad), or None
     when all waypoints coincide. The last waypoint is kept exactly."""
     kept = [waypoints[0]]
@@ -463,7 +606,7 @@ def _time_segment(
 ) -> _Motion | None:
     """TOPPRA on one segment, rest to rest, with the grid refined until the limits hold between
     gridpoints (module docstring); None for a segment without motion."""
-    chord = _chord_path(waypoints)
+    chord = chord_path(waypoints)
     if chord is None:
         return None
     s, w = chord

@@ -16,26 +16,31 @@ per joint, in URDF joint order. Pinocchio stores a continuous joint (kinova join
 (cos θ, sin θ); :meth:`Robot.to_pin` / :meth:`Robot.from_pin` convert. Continuous joints get the limits
 ±2π in θ (two full turns of cable; a trajectory never needs more), every other joint its URDF limits.
 
-**Supported robots** (``SUPPORTED_ROBOTS``), their flange frames, reference configurations and default
-acceleration limits (rad/s², used where ``robot.acceleration_limit`` is not set):
+**Supported robots** (``SUPPORTED_ROBOTS``), their flange frames and reference configurations:
 
-========  =======================  =============================  ===============================
-robot     flange (URDF frame)      reference θ_ref                acceleration limit (rad/s²)
-========  =======================  =============================  ===============================
-panda     ``panda_hand_tcp``       SRDF ``default``               3.75 1.875 2.5 3.125 3.75 5 5 [1]
-ur3/5/10  ``tool0``                (0, −π/2, π/2, −π/2, −π/2, 0)  2.0 [2]
-xarm7     ``link_eef``             (0, −0.5, 0, 1, 0, 1.5, 0)     2.0 [2]
-kinova    ``j2s6s200_end_effector``  SRDF ``arm_up`` [3]          1.0 [2]
-z1        ``gripperStator``        (0, 1.2, −1.0, −0.2, 0, 0)     2.0 [2]
-========  =======================  =============================  ===============================
+========  =======================  =============================
+robot     flange (URDF frame)      reference θ_ref
+========  =======================  =============================
+panda     ``panda_hand_tcp``       SRDF ``default``
+ur3/5/10  ``tool0``                (0, −π/2, π/2, −π/2, −π/2, 0)
+xarm7     ``link_eef``             (0, −0.5, 0, 1, 0, 1.5, 0)
+kinova    ``j2s6s200_end_effector``  SRDF ``arm_up`` [1]
+z1        ``gripperStator``        (0, 1.2, −1.0, −0.2, 0, 0)
+========  =======================  =============================
 
-[1] MoveIt's ``panda_moveit_config``: a quarter of libfranka's hard limits (15, 7.5, 10, 12.5, 15, 20,
-20). [2] Conservative defaults of ours, not manufacturer figures: set ``robot.acceleration_limit``
-for a real cell. [3] Joint values outside the URDF limits are wrapped by ±2π (the same pose).
+[1] Joint values outside the URDF limits are wrapped by ±2π (the same pose).
+
+**Joint limits** (:data:`ROBOTS`, each row cites its source): velocity = min(URDF, the maker's
+published joint speed), acceleration and jerk from the maker where published. Where a maker publishes
+none (UR publishes no joint acceleration or jerk limits; none for kinova's JACO² or the z1 that we
+could find), the value is ours, marked so: an acceleration the maker's own motion-planning
+configuration uses where there is one, else conservative, and the jerk :data:`DEFAULT_JERK_RAMP_S`
+ramp: the acceleration limit reached in 0.05 s, J = a_max / 0.05 s. ``robot.acceleration_limit`` and
+``robot.jerk_limit`` override them (one value or one per joint).
 
 Kinova's and z1's tool frames point their +x out of the tool; their ``flange`` is rotated by
 Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked (closed).
-Velocity limits are the URDF's; ``robot.velocity_scale`` is *not* applied here (the timing applies it).
+``robot.velocity_scale`` is *not* applied here (the timing applies it).
 """
 
 from __future__ import annotations
@@ -72,6 +77,8 @@ CONTINUOUS_LIMIT = 2 * np.pi
 
 #: Acceleration limit of a user URDF when ``robot.acceleration_limit`` is not set (rad/s²).
 DEFAULT_ACCELERATION_LIMIT = 2.0
+#: Where no jerk limit is published: the time (s) to reach the acceleration limit, J = a_max / ramp.
+DEFAULT_JERK_RAMP_S = 0.05
 
 _UR_REFERENCE = (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0)
 
@@ -92,7 +99,26 @@ class RobotInfo:
     reference: str | None = None
     theta_ref: tuple[float, ...] | None = None
     locked_joints: tuple[str, ...] = ()
+    velocity_limit: tuple[float, ...] | float | None = None
     acceleration_limit: tuple[float, ...] | float = DEFAULT_ACCELERATION_LIMIT
+    jerk_limit: tuple[float, ...] | float | None = None
+
+    def jerk(self) -> tuple[float, ...] | float:
+        """The published jerk limit, else the acceleration limit over :data:`DEFAULT_JERK_RAMP_S`."""
+        if self.jerk_limit is not None:
+            return self.jerk_limit
+        return tuple(np.asarray(self.acceleration_limit, float).ravel() / DEFAULT_JERK_RAMP_S)
+
+
+_DEG = np.pi / 180.0
+#: UR CB3 datasheets ("Technical specifications UR3/UR5/UR10", universal-robots.com): joint speeds.
+_UR3_SPEED = (180 * _DEG,) * 3 + (360 * _DEG,) * 3
+_UR5_SPEED = 180 * _DEG
+_UR10_SPEED = (120 * _DEG,) * 2 + (180 * _DEG,) * 4
+#: UR publishes no joint acceleration limit ("the robot does not inherently have any limits on joint
+#: accelerations (only on torques)"); UR's own MoveIt configuration uses 5 rad/s² for every joint
+#: (UniversalRobots/Universal_Robots_ROS2_Driver, ur_moveit_config/config/joint_limits.yaml).
+_UR_ACCELERATION = 5.0
 
 
 ROBOTS: dict[str, RobotInfo] = {
@@ -102,18 +128,46 @@ ROBOTS: dict[str, RobotInfo] = {
         "panda_hand_tcp",
         reference="default",
         locked_joints=("panda_finger_joint1", "panda_finger_joint2"),
-        acceleration_limit=(3.75, 1.875, 2.5, 3.125, 3.75, 5.0, 5.0),
+        # Franka Emika, "Robot and interface specifications" (frankaemika.github.io/docs/control_parameters):
+        # q̇_max 2.175 (joints 1–4) / 2.61 rad/s, q̈_max 15 7.5 10 12.5 15 20 20 rad/s², jerk 7500 rad/s³
+        velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
+        acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
+        jerk_limit=7500.0,
     ),
-    "ur3": RobotInfo("ur_description/urdf/ur3_robot.urdf", None, "tool0", theta_ref=_UR_REFERENCE),
+    "ur3": RobotInfo(
+        "ur_description/urdf/ur3_robot.urdf",
+        None,
+        "tool0",
+        theta_ref=_UR_REFERENCE,
+        velocity_limit=_UR3_SPEED,  # UR3 CB3 datasheet: base, shoulder, elbow 180°/s, wrists 360°/s
+        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
+    ),
     "ur5": RobotInfo(
-        "ur_description/urdf/ur5_robot.urdf", "ur_description/srdf/ur5.srdf", "tool0", theta_ref=_UR_REFERENCE
+        "ur_description/urdf/ur5_robot.urdf",
+        "ur_description/srdf/ur5.srdf",
+        "tool0",
+        theta_ref=_UR_REFERENCE,
+        velocity_limit=_UR5_SPEED,  # UR5 CB3 datasheet: every joint 180°/s
+        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
-    "ur10": RobotInfo("ur_description/urdf/ur10_robot.urdf", None, "tool0", theta_ref=_UR_REFERENCE),
+    "ur10": RobotInfo(
+        "ur_description/urdf/ur10_robot.urdf",
+        None,
+        "tool0",
+        theta_ref=_UR_REFERENCE,
+        velocity_limit=_UR10_SPEED,  # UR10 CB3 datasheet: base, shoulder 120°/s, the others 180°/s
+        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
+    ),
     "xarm7": RobotInfo(
         "xarm_description/urdf/xarm7.urdf",
         "xarm_description/srdf/xarm7.srdf",
         "link_eef",
         theta_ref=(0.0, -0.5, 0.0, 1.0, 0.0, 1.5, 0.0),
+        # UFACTORY xArm user manual, §8 technical specifications: "Maximum Joint Speed 180°/s"
+        velocity_limit=180 * _DEG,
+        # UFACTORY's own MoveIt configuration: 20 rad/s² for every joint
+        # (xArm-Developer/xarm_ros2, xarm_moveit_config/config/xarm7/joint_limits.yaml)
+        acceleration_limit=20.0,
     ),
     "kinova": RobotInfo(
         "kinova_description/robots/kinova.urdf",
@@ -121,6 +175,8 @@ ROBOTS: dict[str, RobotInfo] = {
         "j2s6s200_end_effector",
         tool_rpy_deg=(0.0, 90.0, 0.0),
         reference="arm_up",
+        # the JACO² 6-DOF spherical-wrist arm (j2s6s200, Kinova Gen2, not Gen3); its URDF (Kinova's
+        # kinova-ros) has 36°/s on joints 1–3, 48°/s on 4–6. No published acceleration: ours.
         acceleration_limit=1.0,
     ),
     "z1": RobotInfo(
@@ -130,6 +186,8 @@ ROBOTS: dict[str, RobotInfo] = {
         tool_rpy_deg=(0.0, 90.0, 0.0),
         theta_ref=(0.0, 1.2, -1.0, -0.2, 0.0, 0.0),
         locked_joints=("jointGripper",),
+        # Unitree's URDF: π rad/s on every joint; no published acceleration: ours
+        acceleration_limit=2.0,
     ),
 }
 
@@ -202,8 +260,9 @@ class Robot:
 
     Attributes: ``name``; pinocchio ``model`` and its scratch ``data`` (used by the numeric methods);
     ``flange_frame_id``/``light_frame_id`` (frames ``flange``, ``light``); ``joint_names`` (URDF names,
-    θ order); ``n``; ``lower``/``upper`` (rad or m), ``velocity_limit`` (URDF, rad/s or m/s),
-    ``acceleration_limit`` (rad/s² or m/s²), ``theta_ref``: arrays of length n. ``base_placement`` is
+    θ order); ``n``; ``lower``/``upper`` (rad or m), ``velocity_limit`` (rad/s or m/s),
+    ``acceleration_limit`` (rad/s² or m/s²), ``jerk_limit`` (rad/s³ or m/s³), ``theta_ref``: arrays of
+    length n. ``base_placement`` is
     T_WB. ``urdf_path``/``package_dirs``/``locked_joints`` rebuild geometry (:meth:`geometry_model`).
     """
 
@@ -214,7 +273,9 @@ class Robot:
         *,
         theta_ref: ArrayLike | None,
         acceleration_limit: ArrayLike,
+        jerk_limit: ArrayLike,
         base_placement: pin.SE3,
+        velocity_limit: ArrayLike | None = None,
         urdf_path: Path,
         package_dirs: Sequence[Path],
         locked_joints: dict[str, float],
@@ -244,13 +305,18 @@ class Robot:
         self.lower[angle_v] = model.lowerPositionLimit[angle_q]
         self.upper[angle_v] = model.upperPositionLimit[angle_q]
         self.velocity_limit = np.array(model.velocityLimit, float).copy()
+        if velocity_limit is not None:
+            published = np.broadcast_to(np.asarray(velocity_limit, float), (self.n,))
+            self.velocity_limit = np.minimum(self.velocity_limit, published)
         self.acceleration_limit = np.broadcast_to(np.asarray(acceleration_limit, float), (self.n,)).copy()
+        self.jerk_limit = np.broadcast_to(np.asarray(jerk_limit, float), (self.n,)).copy()
         if theta_ref is None:
             ref = np.where(cont, 0.0, 0.5 * (self.lower + self.upper))
         else:
             ref = _wrap_into_limits(np.asarray(theta_ref, float), self.lower, self.upper)
         self.theta_ref = ref
-        for arr in (self.lower, self.upper, self.velocity_limit, self.acceleration_limit, self.theta_ref):
+        limits = (self.velocity_limit, self.acceleration_limit, self.jerk_limit)
+        for arr in (self.lower, self.upper, *limits, self.theta_ref):
             arr.setflags(write=False)
         self._symbolic: casadi.Function | None = None
 
@@ -467,14 +533,22 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if theta_ref.shape != (model.nv,):
             raise RobotError(f"{spec.name}: reference has {theta_ref.size} values for {model.nv} joints")
     accel = spec.acceleration_limit if spec.acceleration_limit is not None else info.acceleration_limit
-    accel_arr = np.asarray(accel, float)
-    if accel_arr.ndim and accel_arr.shape != (model.nv,):
-        raise RobotError(f"{spec.name}: {accel_arr.size} acceleration limits for {model.nv} joints")
+    jerk = spec.jerk_limit if spec.jerk_limit is not None else info.jerk()
+    if spec.jerk_limit is None and spec.acceleration_limit is not None and info.jerk_limit is None:
+        jerk = tuple(np.asarray(accel, float).ravel() / DEFAULT_JERK_RAMP_S)  # the ramp of the override
+    limits = {}
+    for name, value in (("acceleration_limit", accel), ("jerk_limit", jerk)):
+        arr = np.asarray(value, float)
+        if arr.ndim and arr.shape not in ((1,), (model.nv,)):
+            raise RobotError(f"robot.{name}: {arr.size} values for the {model.nv} joints of {spec.name}")
+        limits[name] = arr.ravel() if arr.shape != (1,) else arr[0]
     return Robot(
         spec.name,
         model,
         theta_ref=theta_ref,
-        acceleration_limit=accel_arr,
+        acceleration_limit=limits["acceleration_limit"],
+        jerk_limit=limits["jerk_limit"],
+        velocity_limit=info.velocity_limit,
         base_placement=base,
         urdf_path=urdf_path,
         package_dirs=package_dirs,
