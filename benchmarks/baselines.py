@@ -94,7 +94,7 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     order = visiting_order(setup, placement)
     positions = np.array([placement.landmarks[i].position for i in order])
     path = build_path(sphere, positions, np.arange(len(order)), math.radians(problem.trajectory.knot_spacing_deg))
-    knots, _ = knot_ik(setup, path, placement.thetas[order[0]])
+    knots, _ = knot_ik(setup, path, placement.thetas[order])
     velocity = limits.velocity
     trajectory = time_parameterize(
         [knots[s] for s in path.segments()] or [knots[:1]],

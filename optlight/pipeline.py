@@ -4,13 +4,16 @@ A straight line of stages, each taking built objects and returning a typed resul
 ``Plan.timings``):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once;
-2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`);
+2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
+   on the lights whose housing stays out of the camera's view; landmarks closer than ``[landmarks]
+   distinct_deg`` are one capture (:func:`~optlight.planning.landmarks.distinct_landmarks`);
 3. ``placement``: joint angles at every landmark (:func:`~optlight.planning.policy.place_landmarks`:
    IK, a clear posture, or the joint-space placement NLP, which moves a landmark along its azimuth);
 4. ``path``: visiting order, great-circle knots, and per-knot IK along the path (the paper's
    pipeline, and the NLP's warm start);
 5. ``nlp``: the trajectory NLP over all knots (:func:`~optlight.planning.trajectory.optimize_knots`),
-   with clearance and view-cone rows when ``[environment] enabled``;
+   with the view rows (``[view]``) and clearance rows (``[environment] enabled``); the transfers from
+   the start configuration to the first capture and back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
@@ -31,11 +34,11 @@ import numpy as np
 from optlight.environment.view import view_check_for
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
-from optlight.planning.landmarks import find_landmarks
+from optlight.planning.landmarks import distinct_landmarks, find_landmarks
 from optlight.planning.path import build_path
 from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
 from optlight.planning.timing import time_parameterize
-from optlight.planning.trajectory import optimize_knots
+from optlight.planning.trajectory import optimize_knots, plan_transfer
 from optlight.setup import Setup
 from optlight.spec import Problem
 from optlight.verify import verify_trajectory
@@ -44,11 +47,6 @@ from optlight.verify import verify_trajectory
 Progress = Callable[[str, int, int], None]
 
 STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
-
-# Issue 11: the exact view and beam check runs on every plan. While the planner does not yet keep the
-# view clear (most captures of the default problem are blocked), it is reported without deciding the
-# verdict; set this to True once the planner keeps the links and the housing out of the view.
-ENFORCE_VIEW_CHECK = False
 
 
 def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = None) -> Plan:
@@ -77,25 +75,37 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
 
     start = time.perf_counter()
     landmarks = find_landmarks(setup, progress=lambda d, t: notify("landmarks", d, t))
+    captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
     timings["landmarks"] = time.perf_counter() - start
 
     with stage("placement"):
-        placement = place_landmarks(setup, landmarks.landmarks)
-    notes = list(placement.warnings)
+        placement = place_landmarks(setup, captures)
+    notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
         order = visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
         positions = np.array([lm.position for lm in visited])
+        landmark_thetas = placement.thetas[order]
+        # the NLP's step bound |θ_{k+1} − θ_k|∞ ≤ max_step_rad must leave room to go between postures
+        reconfiguration = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
         path = build_path(
-            sphere, positions, np.arange(len(visited)), np.deg2rad(setup.trajectory_spec.knot_spacing_deg)
+            sphere,
+            positions,
+            np.arange(len(visited)),
+            np.deg2rad(setup.trajectory_spec.knot_spacing_deg),
+            min_intervals=np.ceil(2.0 * reconfiguration / setup.trajectory_spec.max_step_rad).astype(int) + 1,
         )
-        warm, failures = knot_ik(setup, path, placement.thetas[order[0]])
+        warm, failures = knot_ik(setup, path, landmark_thetas)
     if failures:
         notes.append(f"per-knot IK did not converge at {failures} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
         nlp = optimize_knots(setup, path, warm)
+        approach = plan_transfer(setup, setup.start, nlp.theta[0])
+        retreat = (
+            plan_transfer(setup, nlp.theta[-1], setup.start) if setup.trajectory_spec.return_home else None
+        )
 
     with stage("timing"):
         segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]  # one landmark: its dwell
@@ -109,10 +119,18 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
                 limits.jerk,
                 spec.dwell_s,
                 joint_names=robot.joint_names,
+                approach=approach,
+                retreat=retreat,
             )
         else:
             trajectory = time_parameterize(
-                segments, limits.velocity, limits.acceleration, spec.dwell_s, joint_names=robot.joint_names
+                segments,
+                limits.velocity,
+                limits.acceleration,
+                spec.dwell_s,
+                joint_names=robot.joint_names,
+                approach=approach,
+                retreat=retreat,
             )
 
     with stage("verify"):
@@ -133,8 +151,11 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
                 else None
             ),
             jerk_limit=limits.jerk if jerk_limited else None,
-            view=view_check_for(robot, setup.scene, setup.problem.light).check,
-            advisory=() if ENFORCE_VIEW_CHECK else ("view", "beam"),
+            view=(
+                view_check_for(robot, setup.scene, setup.problem.light).check
+                if setup.problem.view.mode != "off"
+                else None
+            ),
             rate_hz=max(1000.0, spec.rate_hz),
         )
     timings["total"] = time.perf_counter() - t_total
@@ -144,7 +165,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         setup=setup,
         landmarks=landmarks,
         visited=visited,
-        landmark_thetas=placement.thetas[order],
+        landmark_thetas=landmark_thetas,
         path=path,
         knot_ik=warm,
         nlp=nlp,

@@ -14,6 +14,7 @@ at once or not at all (:func:`optlight.export.write_results`):
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -110,8 +111,20 @@ def report_markdown(
 ) -> str:
     """report.md: what was solved, the key numbers, the verification and the figures."""
     s, t = summary, timings
+    view = setup.problem.view
+    protected = (
+        "> **The camera's view is not protected** (`[view] mode = \"off\"`): robot links or the lamp may "
+        "stand between the camera and the object in these images."
+        if view.mode == "off"
+        else f"The camera's view of the object is kept clear of the robot and the lamp "
+        f"{'at every capture' if view.mode == 'capture' else 'along the whole motion'}; lights nearer "
+        f"the camera's axis than zenith {math.degrees(setup.view_zenith):.1f}° are left out (the lamp "
+        "would be in front of the lens)."
+    )
     lines = [
         f"# optlight plan: {setup.problem.name}",
+        "",
+        protected,
         "",
         setup.problem.description,
         "",

@@ -8,8 +8,12 @@
 - the objectives on both scenes (``objective``, ``search_objective``), with their reference;
 - the robot, and the ``limits`` a plan must keep (its URDF velocity limits times ``[robot]
   velocity_scale``);
-- the environment when ``[environment] enabled`` (its CasADi clearance and view functions are built
-  on first use and kept by the environment);
+- the environment: obstacles and self-collision when ``[environment] enabled``, the camera's view
+  (``[view]``) unless it is off; its CasADi clearance and view functions are built on first use and
+  kept by the environment;
+- the lights the landmark search may use: the allowed cap less the lights whose housing would enter
+  the camera's view (``view_zenith``, see :func:`view_zenith`);
+- the start configuration (``[robot] start``);
 - the generalized IK's settings from ``[solver]``.
 
 The planners take a ``Setup`` and read their configuration from its typed sections (``landmark_spec``,
@@ -22,16 +26,20 @@ object fits in the light sphere, the camera sees it): each such mistake is a
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+import coal
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.environment import Environment
+from optlight.environment import LIGHT, Environment
+from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
 from optlight.robot import Robot, ik_settings, load_robot
@@ -85,6 +93,8 @@ class Setup:
     limits: MotionLimits
     environment: Environment | None
     ik: Mapping[str, Any]
+    start: Array
+    view_zenith: float
 
     @classmethod
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
@@ -98,8 +108,11 @@ class Setup:
         )
         robot = load_robot(problem)
         environment = (
-            Environment.from_problem(problem, scene.mesh.vertices) if problem.environment.enabled else None
+            Environment.from_problem(problem, scene.mesh.vertices)
+            if problem.environment.enabled or problem.view.mode != "off"
+            else None
         )
+        start = _start_configuration(problem, robot, environment)
         return cls(
             problem=problem,
             scene=scene,
@@ -110,12 +123,17 @@ class Setup:
             limits=MotionLimits.of(robot, problem.robot.velocity_scale),
             environment=environment,
             ik=MappingProxyType(ik_settings(problem.solver)),
+            start=start,
+            view_zenith=view_zenith(problem, scene.sphere, environment, robot),
         )
 
     @property
     def sphere(self) -> LightSphere:
-        """The light sphere (centre O, radius b, frame, allowed zenith range)."""
-        return self.scene.sphere
+        """The light sphere (centre O, radius b, frame) with the zenith range the lights may use:
+        ``[light_sphere]``'s, less the lights whose housing would enter the camera's view."""
+        return dataclasses.replace(
+            self.scene.sphere, zenith_min=max(self.scene.sphere.zenith_min, self.view_zenith)
+        )
 
     @property
     def landmark_spec(self) -> LandmarksSpec:
@@ -152,3 +170,139 @@ def _search_scene(scene: Scene, resolution: int) -> Scene:
     if cam.width >= cam.height:
         return scene.resampled(resolution, max(1, round(resolution * cam.height / cam.width)))
     return scene.resampled(max(1, round(resolution * cam.width / cam.height)), resolution)
+
+
+def housing_clearance(sphere: LightSphere, environment: Environment, zenith: float) -> float:
+    """Distance (m, < 0 when they meet) between the light housing and the camera's view cone, the
+    light at ``zenith`` (rad) on the sphere, aimed at O (any azimuth: the cone is symmetric about the
+    pole): coal's exact distance between the housing shape (``environment.housing``, centred
+    ``housing_offset`` behind the emitting point, away from O) and the cone."""
+    cone = environment.view_cone
+    assert cone is not None
+    d = sphere.direction(zenith, 0.0)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, d)
+    x /= np.linalg.norm(x)
+    centre = sphere.center + (sphere.radius + environment.housing_offset) * d
+    housing = coal.Transform3s(np.column_stack([x, np.cross(d, x), d]), centre)
+    place = cone.placement
+    return float(
+        coal.distance(
+            environment.housing,
+            housing,
+            cone.coal_geometry(),
+            coal.Transform3s(place.rotation, place.translation),
+            coal.DistanceRequest(),
+            coal.DistanceResult(),
+        )
+    )
+
+
+#: Rolls of the light about its axis at which :func:`housing_sphere_clearance` evaluates the housing's
+#: spheres (their fit need not be symmetric about the axis).
+ROLLS = 12
+
+
+def housing_sphere_clearance(
+    sphere: LightSphere, environment: Environment, robot: Robot, zenith: float
+) -> float:
+    """The same as :func:`housing_clearance` for the NLPs' model of the housing: the smallest
+    sd_cone(c) − r (m) over its fitted spheres (:class:`~optlight.environment.RobotSpheres`, body
+    "light") and over :data:`ROLLS` rolls of the light about its axis (the roll is free)."""
+    cone = environment.view_cone
+    assert cone is not None
+    spheres = environment.collision_model(robot).spheres
+    light = [i for i, b in enumerate(spheres.bodies) if b.name == LIGHT][0]
+    body = spheres.bodies[light]
+    # sphere centres in the light frame: the body's are in its joint's frame
+    frame = robot.model.frames[robot.light_frame_id].placement
+    centres = (body.centers - frame.translation) @ frame.rotation
+    d = sphere.direction(zenith, 0.0)
+    z = -d  # the light emits towards O
+    x0 = np.cross([1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0], z)
+    x0 /= np.linalg.norm(x0)
+    y0 = np.cross(z, x0)
+    a = sphere.center + sphere.radius * d
+    worst = math.inf
+    for roll in np.linspace(0.0, 2 * np.pi, ROLLS, endpoint=False):
+        x = math.cos(roll) * x0 + math.sin(roll) * y0
+        rotation = np.column_stack([x, np.cross(z, x), z])
+        world = a + centres @ rotation.T
+        worst = min(worst, float(np.min(cone.signed_distance(world) - body.radii)))
+    return worst
+
+
+def view_zenith(
+    problem: Problem, sphere: LightSphere, environment: Environment | None, robot: Robot
+) -> float:
+    """The smallest zenith (rad) at which the light housing clears the camera's view cone (0 when the
+    view is off): lights nearer the camera's axis would put the lamp in front of the lens. Clear means
+    both exactly (:func:`housing_clearance`) and for the NLPs' spheres (:func:`housing_sphere_clearance`),
+    so that every light the search proposes is one the placement and trajectory NLPs can hold. Found by
+    bisection (the clearance grows with the zenith) to 1e-7 rad and rounded up; a
+    :class:`ProblemError` naming ``light_sphere.zenith_max_deg`` when no light of the cap is clear."""
+    if environment is None or environment.view_cone is None:
+        return 0.0
+
+    def clear(zenith: float) -> bool:
+        return (
+            housing_clearance(sphere, environment, zenith) >= 0.0
+            and housing_sphere_clearance(sphere, environment, robot, zenith) >= 0.0
+        )
+
+    lo, hi = sphere.zenith_min, sphere.zenith_max
+    if clear(lo):
+        return 0.0
+    if not clear(hi):
+        raise ProblemError(
+            str(problem.source) if problem.source else "<inline>",
+            "light_sphere.zenith_max_deg",
+            "a light cap that reaches out of the camera's view (the housing of [light] is in the view "
+            'cone at every allowed zenith; widen the cap, move the camera back, or set [view] mode = "off")',
+            problem.light_sphere.zenith_max_deg,
+        )
+    while hi - lo > 1e-7:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if clear(mid) else (mid, hi)
+    return hi
+
+
+def _start_configuration(problem: Problem, robot: Robot, environment: Environment | None) -> Array:
+    """θ_start (rad) from ``[robot] start``: joint angles, an SRDF configuration's name, or (unset)
+    the robot's reference configuration; a :class:`ProblemError` naming ``robot.start`` when it has
+    the wrong length, lies outside the joint limits, is not a configuration of the SRDF, or puts the
+    robot into an obstacle or itself (``[environment] enabled``)."""
+    file = str(problem.source) if problem.source else "<inline>"
+    value = problem.robot.start
+    if value is None:
+        theta = np.asarray(robot.theta_ref, float)
+    elif isinstance(value, str):
+        if value not in robot.named_configurations:
+            names = ", ".join(sorted(robot.named_configurations)) or "none in its SRDF"
+            raise ProblemError(
+                file, "robot.start", f"joint angles or a configuration of {robot.name} ({names})", value
+            )
+        theta = robot.named_configurations[value]
+    else:
+        theta = np.asarray(value, float)
+        if theta.shape != (robot.n,):
+            raise ProblemError(file, "robot.start", f"{robot.n} joint angles for {robot.name}", list(value))
+        if not robot.within_limits(theta, tol=0.0):
+            raise ProblemError(
+                file,
+                "robot.start",
+                f"joint angles within the limits of {robot.name} "
+                f"({', '.join(f'[{lo:.3g}, {hi:.3g}]' for lo, hi in zip(robot.lower, robot.upper, strict=True))} rad)",
+                list(value),
+            )
+    if environment is not None and environment.collisions:
+        clearance, _ = environment.sphere_clearance(robot, theta)
+        worst = environment.clearance_labels(robot)[int(np.argmin(clearance))] if clearance.size else ""
+        if clearance.size and clearance.min() < 0.0:
+            raise ProblemError(
+                file,
+                "robot.start",
+                f"a configuration clear of the environment ({worst} is {-clearance.min() * 1e3:.1f} mm too close)",
+                value if value is not None else "the reference configuration",
+            )
+    return theta

@@ -194,6 +194,11 @@ class RobotSpec:
     velocity_scale: float = key(
         1.0, "fraction of the URDF velocity limits the plan may use", lo=0.0, hi=1.0, lo_open=True
     )
+    start: str | tuple[float, ...] | None = key(
+        None,
+        "where the robot is when the plan starts: joint angles (rad, one per joint) or the name of an SRDF "
+        "configuration (default: the robot's reference configuration, its SRDF ready/default pose)",
+    )
 
 
 @dataclass(frozen=True)
@@ -255,7 +260,13 @@ class LandmarksSpec:
     mode: Literal["azimuth", "free"] = key(
         "azimuth", "best zenith per equally spaced azimuth, or the best positions on the cap"
     )
-    count: int = key(36, "number M of landmarks", lo=1, hi=720)
+    count: int = key(
+        36,
+        "number M of landmarks searched (azimuths, or free positions); landmarks within distinct_deg of "
+        "each other are one capture, so a plan can have fewer captures than count",
+        lo=1,
+        hi=720,
+    )
     min_separation_deg: float = key(
         10.0, "smallest angle between two landmarks (mode = free)", unit="deg", lo=0.0
     )
@@ -276,6 +287,12 @@ class LandmarksSpec:
         hi=8192,
     )
     allow_partial: bool = key(False, "drop unreachable landmarks with a warning instead of failing")
+    distinct_deg: float = key(
+        0.5,
+        "landmarks closer than this angle are one capture (the same image): the lower-cost one is kept",
+        unit="deg",
+        lo=0.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -311,6 +328,7 @@ class TrajectorySpec:
         unit="s",
         lo=0.0,
     )
+    return_home: bool = key(True, "end the plan back at the start configuration ([robot] start)")
 
 
 @dataclass(frozen=True)
@@ -376,10 +394,11 @@ class SphereSpec:
 @dataclass(frozen=True)
 class EnvironmentSpec:
     """What surrounds the robot: a table, the camera body and stand, the object's bounding sphere,
-    extra boxes, cylinders and spheres; the robot's own links; the camera's view of the object. Off
-    by default: with ``enabled = false`` none of it is modelled, constrained or checked."""
+    extra boxes, cylinders and spheres; the robot's own links. Off by default: with
+    ``enabled = false`` none of it is modelled, constrained or checked (the camera's view is
+    ``[view]``'s, on by default)."""
 
-    enabled: bool = key(False, "model the environment: clearance and view-cone constraints, exact checks")
+    enabled: bool = key(False, "model the environment: clearance constraints and exact checks")
     margin_m: float = key(
         0.01, "smallest allowed distance between the robot (light included) and an obstacle", unit="m", lo=0.0
     )
@@ -411,28 +430,25 @@ class EnvironmentSpec:
         lo=0.0,
         lo_open=True,
     )
-    light_radius_m: float = key(
-        0.025,
-        "radius of the light housing, a cylinder behind the light frame (along −z)",
-        unit="m",
-        lo=0.0,
-        lo_open=True,
-    )
-    light_length_m: float = key(0.05, "length of the light housing", unit="m", lo=0.0, lo_open=True)
-    view_cone: Literal["off", "capture", "path"] = key(
-        "capture",
-        "keep the robot and the light out of the camera's view of the object at capture times, "
-        "along the whole path, or nowhere",
-    )
-    view_margin_deg: float = key(
-        1.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0
-    )
     spheres_per_link: int = key(
         4, "most spheres fitted to one link's collision geometry (the NLPs' approximation)", lo=1, hi=16
     )
     boxes: tuple[BoxSpec, ...] = key((), "box obstacles, as [[environment.boxes]] tables")
     cylinders: tuple[CylinderSpec, ...] = key((), "cylinder obstacles, as [[environment.cylinders]] tables")
     spheres: tuple[SphereSpec, ...] = key((), "sphere obstacles, as [[environment.spheres]] tables")
+
+
+@dataclass(frozen=True)
+class ViewSpec:
+    """The camera's view of the object: the cone from the camera centre to the object's bounding
+    sphere (half-angle asin(R/d) + ``margin_deg``). No robot link and no part of the light housing
+    may enter it, and the beam from the light to the object must be clear of the robot: at every
+    capture (default), along the whole motion, or not at all (``off``: the report says so first)."""
+
+    mode: Literal["capture", "path", "off"] = key(
+        "capture", "keep the view clear at every capture, along the whole motion, or not at all"
+    )
+    margin_deg: float = key(1.0, "added to the view cone's half-angle asin(R/d)", unit="deg", lo=0.0, hi=30.0)
 
 
 @dataclass(frozen=True)
@@ -516,6 +532,7 @@ class Problem:
     solver: SolverSpec = section(SolverSpec, "numerical settings")
     environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
     lightset: LightSetSpec = section(LightSetSpec, "lights designed as a set (photometric stereo, RTI, grid)")
+    view: ViewSpec = section(ViewSpec, "the camera's view of the object, kept clear of the robot and the light")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property

@@ -13,6 +13,15 @@ import pytest
 from optlight.setup import Setup
 from optlight.spec import Problem, load_problem, problem_from_dict
 
+#: The paper's layout (the robot's base between the camera and the face) with the camera's view not
+#: protected, for tests about reach alone: there the reference light (zenith 10°) and the pole are
+#: lights the search may propose. The view at the planning stage is tested in test_view_plan.py.
+REACH_ONLY: dict[str, dict[str, Any]] = {
+    "object": {"center_m": [0.35, 0.0, 0.45]},
+    "camera": {"position_m": [-0.343, -0.4, 0.45]},
+    "view": {"mode": "off"},
+}
+
 
 def reduced_problem(name: str = "default", *, camera_px: int | None = None, **sections: dict[str, Any]) -> Problem:
     """A built-in problem with a ``camera_px``² camera (when given) and each of ``sections``

@@ -153,8 +153,9 @@ def test_spheres_cover_every_collision_mesh_vertex_and_surface(env, robot) -> No
         for g in body.geometries:
             obj = cm.geometry.geometryObjects[g]
             if body.name == LIGHT:
+                housing = env.housing  # the [light] housing: a coal cylinder by default
                 mesh = trimesh.creation.cylinder(
-                    radius=env.light_radius, height=env.light_length, sections=256
+                    radius=housing.radius, height=2 * housing.halfLength, sections=256
                 )
                 points.append(mesh.vertices @ obj.placement.rotation.T + obj.placement.translation)
                 continue
@@ -290,7 +291,7 @@ def test_environment_is_off_by_default_and_on_in_the_obstacle_problems() -> None
     names = {o.name for o in Environment.from_problem(load_problem("table_wall")).obstacles}
     assert names == {"object", "table", "camera_body", "camera_stand", "wall"}
     collision = load_problem("collision")
-    assert collision.environment.enabled and collision.environment.view_cone == "off"
+    assert collision.environment.enabled and collision.view.mode == "off"
 
 
 @pytest.mark.parametrize(

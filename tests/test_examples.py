@@ -64,7 +64,16 @@ def test_custom_mesh_writes_mesh_problem_and_renders(tmp_path: Path) -> None:
 
 
 def test_ik_only_solves_every_target(tmp_path: Path) -> None:
-    run_example("ik_only", tmp_path)
+    # the targets cover the whole cap (zenith 0–60°), which the panda reaches in the paper's layout
+    default = (ROOT / "problems" / "default.toml").read_text()
+    paper = tmp_path / "paper_layout.toml"
+    paper.write_text(
+        default.replace("center_m = [0.5, 0.0, 0.4]", "center_m = [0.35, 0.0, 0.45]").replace(
+            "position_m = [-0.151, 0.376, 0.674]", "position_m = [-0.343, -0.4, 0.45]"
+        )
+    )
+    assert paper.read_text() != default
+    run_example("ik_only", tmp_path, "--problem", str(paper))
     with (tmp_path / "ik.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert rows and all(row["success"] == "True" for row in rows)

@@ -11,7 +11,7 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import REACH_ONLY, reduced_problem
 
 import optlight
 from optlight.errors import UnreachableError
@@ -30,10 +30,11 @@ LOW_BASE = [-0.603, -0.55, -0.45]
 
 
 def small_problem(count: int = 8, **sections: dict[str, Any]) -> Problem:
-    """The default problem with a 64² camera searched at its own resolution (so the placement NLP and
-    the landmark search share one model) and ``count`` landmarks."""
+    """The default problem in the :data:`REACH_ONLY` layout with a 64² camera searched at its own
+    resolution (so the placement NLP and the landmark search share one model) and ``count``
+    landmarks."""
     landmarks = {"count": count, "resolution": 64, **sections.pop("landmarks", {})}
-    return reduced_problem(camera_px=64, landmarks=landmarks, **sections)
+    return reduced_problem(camera_px=64, landmarks=landmarks, **{**REACH_ONLY, **sections})
 
 
 class Case:

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REACH_ONLY, reduced_problem
 
 from optlight.geometry import LightSphere
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
@@ -17,8 +18,8 @@ from optlight.setup import Setup
 from optlight.spec import load_problem, problem_from_dict
 
 
-def test_default_problem_cap_is_fully_reachable_by_the_panda(tmp_path: Path) -> None:
-    problem = load_problem("default")
+def test_the_paper_layout_cap_is_fully_reachable_by_the_panda(tmp_path: Path) -> None:
+    problem = reduced_problem(**REACH_ONLY)
     reach = reachability_map(Setup.from_problem(problem), zenith_step_deg=10.0, azimuth_step_deg=30.0)
     assert reach.zenith.shape == (7,) and reach.azimuth.shape == (12,)
     assert np.isclose(np.rad2deg(reach.zenith[-1]), problem.light_sphere.zenith_max_deg)

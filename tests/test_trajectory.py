@@ -21,8 +21,10 @@ def setup(small_setup: Setup):
     zen = np.deg2rad([10, 25, 40, 25, 15])
     az = np.deg2rad([0, 60, 120, 200, 300])
     path = build_path(sphere, sphere.position(zen, az), np.arange(5), np.deg2rad(3.0))
-    start = generalized_ik(robot, sphere, path.positions[0]).theta
-    warm, failures = knot_ik(small_setup, path, start)
+    postures = [generalized_ik(robot, sphere, path.positions[0]).theta]
+    for k in path.landmark_knots[1:]:
+        postures.append(generalized_ik(robot, sphere, path.positions[k], postures[-1], restarts=False).theta)
+    warm, failures = knot_ik(small_setup, path, np.array(postures))
     assert failures == 0
     return robot, sphere, path, warm
 

@@ -32,6 +32,7 @@ import math
 from collections.abc import Callable
 
 import casadi as ca
+import coal
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
@@ -151,8 +152,9 @@ class Environment:
 
     Attributes: ``obstacles`` (tuple of shapes with ``name``), ``view_cone`` (:class:`ViewCone`, or
     None when ``view_mode`` is "off"), ``view_mode`` ("off", "capture", "path"), ``margin`` and
-    ``self_margin`` (m), ``light_radius``/``light_length`` (m, the light housing),
-    ``spheres_per_link``.
+    ``self_margin`` (m), ``housing`` (the light housing's coal shape) and ``housing_offset`` (m, its
+    centre behind the light frame along −z), ``spheres_per_link``, ``collisions`` (obstacles and
+    self-collision modelled: ``[environment] enabled``; without them only the view is).
     """
 
     def __init__(
@@ -163,9 +165,10 @@ class Environment:
         view_mode: str,
         margin: float,
         self_margin: float,
-        light_radius: float,
-        light_length: float,
+        housing: coal.CollisionGeometry,
+        housing_offset: float,
         spheres_per_link: int,
+        collisions: bool = True,
     ) -> None:
         names = [o.name for o in obstacles]
         if len(set(names)) != len(names):
@@ -177,21 +180,23 @@ class Environment:
         self.view_mode = view_mode
         self.margin = float(margin)
         self.self_margin = float(self_margin)
-        self.light_radius = float(light_radius)
-        self.light_length = float(light_length)
+        self.housing = housing
+        self.housing_offset = float(housing_offset)
         self.spheres_per_link = int(spheres_per_link)
+        self.collisions = bool(collisions)
         self._models: dict[int, CollisionModel] = {}
         self._functions: dict[tuple[int, str], tuple[Robot, ca.Function]] = {}
 
     @classmethod
     def from_problem(cls, problem: Problem, object_vertices: ArrayLike | None = None) -> Environment:
-        """The environment of a problem's ``[environment]`` section (built whether or not
-        ``enabled`` is set: the caller decides whether to use it). ``object_vertices`` (V, 3), world
-        frame, m: the built object's, for its bounding sphere when ``object_radius_m`` is not set
-        (built from the problem when not given)."""
+        """The environment of a problem: the obstacles of ``[environment]`` and self-collision when it
+        is enabled, the camera's view (``[view]``) unless its mode is "off", the light housing of
+        ``[light]``. ``object_vertices`` (V, 3), world frame, m: the built object's, for its bounding
+        sphere when ``object_radius_m`` is not set (built from the problem when not given)."""
         spec = problem.environment
         center = np.asarray(problem.object.center_m, float)
-        _check_layout(problem)
+        if spec.enabled:
+            _check_layout(problem)
         if spec.object_radius_m is not None:
             radius = float(spec.object_radius_m)
         else:
@@ -219,18 +224,25 @@ class Environment:
                     )
                 )
         obstacles += [obs for _, obs in listed_obstacles(spec)]
+        view = problem.view
         cone = None
-        if spec.view_cone != "off":
-            cone = ViewCone.around(camera.position, center, radius, math.radians(spec.view_margin_deg))
+        if view.mode != "off":
+            cone = ViewCone.around(camera.position, center, radius, math.radians(view.margin_deg))
+        light = problem.light
+        if light.housing == "cylinder":
+            housing, offset = coal.Cylinder(light.housing_radius_m, light.housing_length_m), 0.5 * light.housing_length_m
+        else:
+            housing, offset = coal.Sphere(light.housing_radius_m), light.housing_radius_m
         return cls(
-            tuple(obstacles),
+            tuple(obstacles) if spec.enabled else (),
             cone,
-            view_mode=spec.view_cone,
+            view_mode=view.mode,
             margin=spec.margin_m,
             self_margin=spec.self_margin_m,
-            light_radius=spec.light_radius_m,
-            light_length=spec.light_length_m,
+            housing=housing,
+            housing_offset=offset,
             spheres_per_link=spec.spheres_per_link,
+            collisions=spec.enabled,
         )
 
     # ------------------------------------------------------------------ robot models
@@ -244,9 +256,10 @@ class Environment:
                 self.view_cone,
                 margin=self.margin,
                 self_margin=self.self_margin,
-                light_radius=self.light_radius,
-                light_length=self.light_length,
+                housing=self.housing,
+                housing_offset=self.housing_offset,
                 max_spheres=self.spheres_per_link,
+                self_collision=self.collisions,
             )
         return self._models[key]
 

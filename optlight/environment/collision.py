@@ -143,9 +143,10 @@ class CollisionModel:
         *,
         margin: float,
         self_margin: float,
-        light_radius: float,
-        light_length: float,
+        housing: coal.CollisionGeometry,
+        housing_offset: float,
         max_spheres: int,
+        self_collision: bool = True,
     ) -> None:
         self.robot = robot
         self.obstacles = obstacles
@@ -167,14 +168,13 @@ class CollisionModel:
         robot_pairs = [(cp.first, cp.second) for cp in geom.collisionPairs]
         geom.removeAllCollisionPairs()
 
-        # Light housing: a cylinder behind the light frame, along −z_L.
+        # Light housing: its shape centred ``housing_offset`` behind the light frame, along −z_L.
         light_frame = model.frames[robot.light_frame_id]
-        housing = light_frame.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -0.5 * light_length]))
-        light_shape = coal.Cylinder(float(light_radius), float(light_length))
+        placement = light_frame.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -housing_offset]))
         light_id = geom.addGeometryObject(
-            pin.GeometryObject(LIGHT, light_frame.parentJoint, robot.light_frame_id, housing, light_shape)
+            pin.GeometryObject(LIGHT, light_frame.parentJoint, robot.light_frame_id, placement, housing)
         )
-        surfaces.append(_surface(light_shape, LIGHT).apply_transform(housing.homogeneous))
+        surfaces.append(_surface(housing, LIGHT).apply_transform(placement.homogeneous))
 
         names: dict[str, list[int]] = {}
         joint_of: dict[str, int] = {}
@@ -192,6 +192,8 @@ class CollisionModel:
 
         candidates = [(a, b) for a, b in robot_pairs if not adjacent(a, b)]
         candidates += [(light_id, g) for g in range(n_robot) if g != light_id and not adjacent(light_id, g)]
+        if not self_collision:  # the view alone: no self pairs, no self rows
+            candidates = []
         obstacle_ids = []
         for obs in obstacles:
             obstacle_ids.append(

@@ -192,11 +192,13 @@ def jerk_limited_timing(
     dwell_s: float,
     *,
     joint_names: Sequence[str] | None = None,
+    approach: ArrayLike | None = None,
+    retreat: ArrayLike | None = None,
 ) -> Trajectory:
     """Time the path through the landmarks with continuous acceleration: rest at every landmark for
     ``dwell_s`` (s), and move along each segment by the jerk-limited profile of the module docstring,
     so that |q̇_j| ≤ velocity_limit_j, |q̈_j| ≤ acceleration_limit_j and |q⃛_j| ≤ jerk_limit_j
-    everywhere (rad/s, rad/s², rad/s³). ``segments`` as for
+    everywhere (rad/s, rad/s², rad/s³). ``segments``, ``approach`` and ``retreat`` as for
     :func:`optlight.planning.timing.time_parameterize`.
 
     Raises ValueError for bad inputs and :class:`SolverError` when ruckig fails on a segment.
@@ -216,4 +218,4 @@ def jerk_limited_timing(
     vmax = positive_limits(velocity_limit, n, "velocity_limit")
     amax = positive_limits(acceleration_limit, n, "acceleration_limit")
     jmax = positive_limits(jerk_limit, n, "jerk_limit")
-    return assemble_trajectory(segments, dwell_s, segment, joint_names)
+    return assemble_trajectory(segments, dwell_s, segment, joint_names, approach=approach, retreat=retreat)

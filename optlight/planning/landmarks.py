@@ -49,7 +49,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -120,7 +120,9 @@ class LandmarkSet:
     ``landmarks`` in azimuth order (azimuth mode) or best first (free mode); ``histograms`` (n, K)
     their soft histograms and ``reference_histogram`` (K,) the reference's, at the camera's
     resolution; ``sweep`` the coarse sweep; ``resolution`` (width, height) of the search renders;
-    ``time_s`` the total wall time, setup (scenes, reference, NLP build) included."""
+    ``time_s`` the total wall time, setup (scenes, reference, NLP build) included. ``view_zenith``
+    (rad): lights nearer the camera's axis were left out, their housing being in the camera's view;
+    ``notes``: the landmarks whose best light lay there, and where the best clear light is."""
 
     landmarks: tuple[Landmark, ...]
     mode: Literal["azimuth", "free"]
@@ -130,6 +132,8 @@ class LandmarkSet:
     sweep: CostGrid
     resolution: tuple[int, int]
     time_s: float
+    view_zenith: float = 0.0
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         return len(self.landmarks)
@@ -216,11 +220,11 @@ def local_minima(values: ArrayLike) -> NDArray[np.intp]:
 
 
 class ZenithRefiner:
-    """The 1-D NLP of azimuth mode, built once: ``min_θ D̃(a(θ, φ), v)`` s.t. ``θ_min ≤ θ ≤ θ_max``,
-    parameters ``p = (φ, v)`` (azimuth, rad; visibility mask (P,))."""
+    """The 1-D NLP of azimuth mode, built once: ``min_θ D̃(a(θ, φ), v)`` s.t. ``θ_min ≤ θ ≤ θ_max``
+    (``sphere``'s allowed range), parameters ``p = (φ, v)`` (azimuth, rad; visibility mask (P,))."""
 
-    def __init__(self, scene: Scene, objective: Objective, solver: SolverSpec) -> None:
-        self.sphere = scene.sphere
+    def __init__(self, scene: Scene, objective: Objective, solver: SolverSpec, sphere: LightSphere) -> None:
+        self.sphere = sphere
         zenith = ca.MX.sym("zenith")
         p = ca.MX.sym("p", 1 + scene.gbuffer.size)
         cost = objective.function(sphere_position(self.sphere, zenith, p[0]), p[1:])
@@ -246,8 +250,10 @@ class CapRefiner:
     and ``d(θ, φ)·d_k ≤ cos(separation)`` for up to ``slots`` accepted directions ``d_k`` (sphere
     frame); parameters ``p = (v, d_1, …, d_slots)``; unused slots have an infinite upper bound."""
 
-    def __init__(self, scene: Scene, objective: Objective, solver: SolverSpec, slots: int) -> None:
-        self.sphere = scene.sphere
+    def __init__(
+        self, scene: Scene, objective: Objective, solver: SolverSpec, slots: int, sphere: LightSphere
+    ) -> None:
+        self.sphere = sphere
         self.slots = slots
         x = ca.MX.sym("x", 2)
         size = scene.gbuffer.size
@@ -307,7 +313,9 @@ class _Search:
         self.objective = setup.objective
         self.search = setup.search_scene
         self.search_objective = setup.search_objective
+        #: The lights the search may use (the view's lights taken away) and the cap as requested.
         self.sphere = setup.sphere
+        self.requested = setup.scene.sphere
 
     def refine(
         self, seed: _Candidate, solve: Callable[[float, float, Array], Solve]
@@ -407,13 +415,80 @@ def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> Landmar
         sweep=grid,
         resolution=(search.search.camera.width, search.search.camera.height),
         time_s=time.perf_counter() - t0,
+        view_zenith=setup.view_zenith,
+        notes=tuple(_view_notes(search, landmarks, grid)),
     )
+
+
+def _view_notes(search: _Search, landmarks: list[Landmark], grid: CostGrid) -> list[str]:
+    """One line on the landmarks whose azimuth's best sweep sample lies in the camera's view (zenith
+    below the smallest allowed one): which they are, where those samples were and how far the
+    landmarks, the best clear lights, are from them (azimuth mode; in free mode, whether the cap's
+    best sample lies there)."""
+    limit = search.sphere.zenith_min
+    inside = grid.zenith < limit - 1e-12
+    if not inside.any():
+        return []
+    view = f"in the camera's view (zenith < {math.degrees(limit):.1f}°)"
+    if search.spec.mode == "free":
+        best = int(np.unravel_index(int(np.argmin(grid.cost)), grid.cost.shape)[1])
+        if not inside[best]:
+            return []
+        return [f"the cap's best light (zenith {math.degrees(grid.zenith[best]):.1f}°) is left out: it is {view}"]
+    moved: dict[int, tuple[float, float]] = {}
+    for lm, row in zip(landmarks, grid.cost, strict=True):
+        i = int(np.argmin(row))
+        if inside[i] and row[i] < row[~inside].min():
+            moved[lm.index] = (math.degrees(grid.zenith[i]), math.degrees(lm.zenith - grid.zenith[i]))
+    if not moved:
+        return []
+    inside_best = [z for z, _ in moved.values()]
+    away = [d for _, d in moved.values()]
+    return [
+        f"landmarks {_index_ranges(sorted(moved))} ({len(moved)} of {len(landmarks)}): the best light of "
+        f"their azimuth (zenith {min(inside_best):.1f}–{max(inside_best):.1f}°) is {view}; each is the best clear "
+        f"light instead, {min(away):.1f}–{max(away):.1f}° from it"
+    ]
+
+
+def _index_ranges(indices: Sequence[int]) -> str:
+    """Sorted indices as runs: [0, 1, 2, 5, 7, 8] → "0–2, 5, 7–8"."""
+    runs: list[list[int]] = []
+    for i in indices:
+        if runs and i == runs[-1][-1] + 1:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    return ", ".join(f"{r[0]}–{r[-1]}" if len(r) > 1 else f"{r[0]}" for r in runs)
+
+
+def distinct_landmarks(landmarks: Sequence[Landmark], tolerance: float) -> tuple[list[Landmark], list[str]]:
+    """The landmarks that are distinct captures: of landmarks whose directions from O are within
+    ``tolerance`` (rad) of each other, only the lowest-cost one is kept (they would give the same
+    image); the notes name the ones merged. The order of ``landmarks`` is kept."""
+    kept: list[int] = []
+    merged: dict[int, list[int]] = {}
+    directions = direction_in_sphere_frame([lm.zenith for lm in landmarks], [lm.azimuth for lm in landmarks])
+    limit = math.cos(tolerance) - 1e-12
+    for i in sorted(range(len(landmarks)), key=lambda i: landmarks[i].cost):
+        twin = next((k for k in kept if directions[k] @ directions[i] >= limit), None)
+        if twin is None:
+            kept.append(i)
+        else:
+            merged.setdefault(twin, []).append(i)
+    notes = [
+        f"landmarks {', '.join(str(landmarks[i].index) for i in sorted([k, *others]))} are one capture "
+        f"(within {math.degrees(tolerance):g}° of each other): landmark {landmarks[k].index} is kept"
+        for k, others in sorted(merged.items())
+    ]
+    return [landmarks[i] for i in sorted(kept)], notes
 
 
 def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
     spec = search.spec
-    refiner = ZenithRefiner(search.search, search.search_objective, search.solver)
-    zenith = zenith_grid(search.sphere, math.radians(spec.sweep_step_deg))
+    refiner = ZenithRefiner(search.search, search.search_objective, search.solver, search.sphere)
+    zenith = _sweep_zeniths(search, math.radians(spec.sweep_step_deg))
+    allowed = np.flatnonzero(zenith >= search.sphere.zenith_min)
     azimuth = 2 * np.pi * np.arange(spec.count) / spec.count
     costs = np.empty((spec.count, zenith.size))
     landmarks: list[Landmark] = []
@@ -423,7 +498,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         costs[j] = _sweep_azimuth(search.search, search.search_objective, zenith, float(phi))
         seeds = [
             _Candidate(float(zenith[i]), float(phi), float(costs[j, i]), "sweep")
-            for i in local_minima(costs[j])
+            for i in allowed[local_minima(costs[j, allowed])]
         ]
         best, iterations, first_status = seeds[0], 0, ""
         for seed in seeds[: spec.seeds]:
@@ -442,11 +517,18 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
     return landmarks, histograms, CostGrid(zenith, azimuth, costs)
 
 
+def _sweep_zeniths(search: _Search, step: float) -> Array:
+    """The sweep's zeniths: the whole ``[light_sphere]`` range (the cost map shows what the view takes
+    away), at most ``step`` apart, plus the smallest allowed zenith (the view's boundary) itself."""
+    full = zenith_grid(search.requested, step)
+    return np.unique(np.r_[full, search.sphere.zenith_min])
+
+
 def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
     spec = search.spec
     step = math.radians(spec.sweep_step_deg)
     separation = math.radians(spec.min_separation_deg)
-    zenith = zenith_grid(search.sphere, step)
+    zenith = _sweep_zeniths(search, step)
     azimuth = np.linspace(0.0, 2 * np.pi, max(3, math.ceil(2 * np.pi / step - 1e-9)), endpoint=False)
     total = azimuth.size + spec.count
     costs = sweep_costs(
@@ -456,10 +538,10 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
         azimuth,
         None if progress is None else (lambda done, _n: progress(done, total)),
     )
-    refiner = CapRefiner(search.search, search.search_objective, search.solver, spec.count)
-    # Samples as unique directions: the pole (θ = 0) once, not once per azimuth.
+    refiner = CapRefiner(search.search, search.search_objective, search.solver, spec.count, search.sphere)
+    # Samples as unique directions: the pole (θ = 0) once, not once per azimuth; only allowed ones.
     jj, ii = np.meshgrid(np.arange(azimuth.size), np.arange(zenith.size), indexing="ij")
-    keep = (zenith[ii] > 0) | (jj == 0)
+    keep = ((zenith[ii] > 0) | (jj == 0)) & (zenith[ii] >= search.sphere.zenith_min)
     jj, ii = jj[keep], ii[keep]
     order = np.argsort(costs[jj, ii], kind="stable")
     directions = direction_in_sphere_frame(zenith[ii], azimuth[jj])

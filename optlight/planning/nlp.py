@@ -99,12 +99,15 @@ def arc_rows(a: Symbolic, center: Any, normal: Any, u0: Any, u1: Any) -> tuple[S
 
 
 def environment_rows(environment: Environment, robot: Robot, theta: Symbolic, *, view: bool = True) -> Symbolic:
-    """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows, then (``view`` and the view
-    cone on) its view rows; the CasADi functions are the environment's, built once per robot."""
-    rows = [environment.clearance_function(robot)(theta)]
+    """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions),
+    then (``view`` and the view cone on) its view rows; the CasADi functions are the environment's,
+    built once per robot."""
+    rows = []
+    if environment.collisions:
+        rows.append(environment.clearance_function(robot)(theta))
     if view and environment.view_cone is not None:
         rows.append(environment.view_cone_function(robot)(theta))
-    return ca.vertcat(*rows)
+    return ca.vertcat(*rows) if rows else ca.MX(0, 1)
 
 
 def sphere_position(sphere: LightSphere, zenith: Symbolic, azimuth: Symbolic) -> Symbolic:

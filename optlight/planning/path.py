@@ -137,8 +137,12 @@ def build_path(
     order: Sequence[int] | NDArray[np.int64],
     knot_spacing: float,
     x0: ArrayLike | None = None,
+    min_intervals: Sequence[int] | None = None,
 ) -> LightPath:
-    """Great-circle arcs through the landmarks in the given order, knots ≤ ``knot_spacing`` rad apart.
+    """Great-circle arcs through the landmarks in the given order, knots ≤ ``knot_spacing`` rad apart,
+    and segment s (landmark s to s + 1 in visiting order) cut into at least ``min_intervals[s]``
+    intervals (a short arc between two postures far apart in joint space needs knots for the arm's
+    reconfiguration, not for the light).
 
     ``x0`` is the light's x axis at the first landmark (default: the sphere's x_S axis, or y_S when
     that is parallel to the optical axis); the roll then follows by parallel transport.
@@ -148,8 +152,10 @@ def build_path(
     units = (pts - sphere.center) / np.linalg.norm(pts - sphere.center, axis=1, keepdims=True)
     knots = [units[order_arr[0]][None, :]]
     landmark_knots = [0]
-    for a, b in zip(order_arr[:-1], order_arr[1:], strict=True):
-        arc = great_circle(units[a], units[b], knot_spacing)
+    least = np.ones(len(order_arr) - 1, dtype=np.int64) if min_intervals is None else np.asarray(min_intervals)
+    for a, b, n in zip(order_arr[:-1], order_arr[1:], least, strict=True):
+        omega = float(np.arccos(np.clip(units[a] @ units[b], -1.0, 1.0)))
+        arc = great_circle(units[a], units[b], min(knot_spacing, omega / n) if omega > 0.0 else knot_spacing)
         knots.append(arc[1:])
         landmark_knots.append(landmark_knots[-1] + len(arc) - 1)
     directions = np.concatenate(knots)

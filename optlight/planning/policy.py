@@ -81,7 +81,8 @@ class Reacher:
             return Attempt(ik, clearance, row, ik.theta)
         if self._posture is None:
             self._posture = ClearPosture(setup, environment)
-        for posture_start in (ik.theta, start):
+        # from the start first: a chain of landmarks keeps its posture where a clear one is near it
+        for posture_start in (start, ik.theta):
             found = self._posture.solve(position, posture_start)
             if found is not None:
                 return Attempt(ik, found[1], found[2], found[0])
@@ -116,8 +117,8 @@ def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reache
     previous = robot.theta_ref
     for lm in landmarks:
         attempts = []
-        for start in (previous, robot.theta_ref):
-            attempts.append(reacher.attempt(lm.position, start))
+        for start, restarts in ((previous, False), (robot.theta_ref, True)):
+            attempts.append(reacher.attempt(lm.position, start, restarts=restarts))
             if attempts[-1].theta is not None:
                 break
         clear = attempts[-1].theta
@@ -194,15 +195,26 @@ def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int
     return azimuth_order([lm.azimuth for lm in placement.landmarks])
 
 
-def knot_ik(setup: Setup, path: LightPath, theta_start: Array) -> tuple[Array, int]:
-    """Per-knot generalized IK along the path, each knot started from the previous one (the paper's
-    pipeline). Returns the (K, n) angles and the number of knots where IK did not converge."""
+def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Array, int]:
+    """Per-knot generalized IK along the path (the paper's pipeline, and the trajectory NLP's warm
+    start), through the landmarks' own joint angles ``landmark_thetas`` (M, n, visiting order: the
+    placement's, clear of the environment): a landmark knot takes its landmark's angles; an interior
+    knot k of a segment ending at knot k₁ starts the IK from θ_{k−1} + (θ_{L} − θ_{k−1}) / (k₁ − k + 1),
+    a share of the way to the next landmark's angles θ_L, so the chain arrives at the posture the
+    placement chose rather than wherever continuation leads. Returns the (K, n) angles and the number
+    of knots where IK did not converge."""
     robot = setup.robot
     thetas = np.empty((path.n_knots, robot.n))
-    previous, failures = theta_start, 0
-    for k, position in enumerate(path.positions):
-        # no random restarts: a restart lands on another IK branch, a jump the path cannot make
-        result = generalized_ik(robot, setup.sphere, position, previous, restarts=False, **setup.ik)
-        failures += not result.success
-        thetas[k] = previous = result.theta
+    knots = path.landmark_knots
+    thetas[knots] = landmark_thetas
+    failures = 0
+    for s, segment in enumerate(path.segments()):
+        goal, last = landmark_thetas[s + 1], segment.stop - 1
+        for k in range(segment.start + 1, last):
+            previous = thetas[k - 1]
+            start = previous + (goal - previous) / (last - k + 1)
+            # no random restarts: a restart lands on another IK branch, a jump the path cannot make
+            result = generalized_ik(robot, setup.sphere, path.positions[k], start, restarts=False, **setup.ik)
+            failures += not result.success
+            thetas[k] = result.theta
     return thetas, failures

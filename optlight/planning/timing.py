@@ -486,6 +486,8 @@ def time_parameterize(
     *,
     gridpoints: int | None = None,
     joint_names: Sequence[str] | None = None,
+    approach: ArrayLike | None = None,
+    retreat: ArrayLike | None = None,
 ) -> Trajectory:
     """Time the path through the landmarks: rest at every landmark for ``dwell_s`` (s), and move
     along each segment time-optimally under |q̇_j| ≤ velocity_limit_j (rad/s) and
@@ -502,6 +504,9 @@ def time_parameterize(
             by toppra from the path curvature (at least 100). The spline knots are always added and
             the grid is refined where the limits are exceeded between gridpoints.
         joint_names: names of the n joints, kept on the trajectory.
+        approach, retreat: (K ≥ 2, n) joint waypoints from the start configuration to the first
+            landmark and from the last landmark back, timed like the segments (rest to rest) before
+            the first dwell and after the last; None: the trajectory starts (ends) at that dwell.
 
     Raises:
         ValueError: inconsistent shapes, non-finite values, segments that do not join, bad limits.
@@ -518,7 +523,7 @@ def time_parameterize(
     n = _check_segments(segments)[1]
     positive_limits(velocity_limit, n, "velocity_limit")
     positive_limits(acceleration_limit, n, "acceleration_limit")
-    return assemble_trajectory(segments, dwell_s, segment, joint_names)
+    return assemble_trajectory(segments, dwell_s, segment, joint_names, approach=approach, retreat=retreat)
 
 
 #: time_segment(segment index, waypoints (K, n), n) -> the motion along the segment, rest to rest, or
@@ -531,19 +536,32 @@ def assemble_trajectory(
     dwell_s: float,
     time_segment: SegmentTiming,
     joint_names: Sequence[str] | None = None,
+    *,
+    approach: ArrayLike | None = None,
+    retreat: ArrayLike | None = None,
 ) -> Trajectory:
-    """Check the segments (see :func:`time_parameterize`) and join dwell, motion, dwell, …, dwell:
-    ``time_segment`` times each segment from rest to rest."""
+    """Check the segments (see :func:`time_parameterize`) and join [approach,] dwell, motion, dwell,
+    …, dwell[, retreat]: ``time_segment`` times each segment, the approach (index −1) and the
+    retreat (index M − 1) from rest to rest."""
     waypoints, n, lone = _check_segments(segments)
     if not (np.isfinite(dwell_s) and dwell_s >= 0):
         raise ValueError(f"dwell_s must be a finite non-negative number, got {dwell_s}")
-    pieces: list[_Piece] = [_Hold(waypoints[0][0], float(dwell_s))]
-    intervals = [(0.0, float(dwell_s))]
-    if lone:
-        return Trajectory(pieces, intervals, [], joint_names)
+    first, last = waypoints[0][0], waypoints[-1][-1]
+    pieces: list[_Piece] = []
+    t = 0.0
+    if approach is not None:
+        path = _transfer(approach, n, "approach")
+        if np.max(np.abs(path[-1] - first)) > JOINT_TOLERANCE:
+            raise ValueError("the approach does not end at the first landmark")
+        motion = time_segment(-1, path, n)
+        if motion is not None:
+            pieces.append(motion)
+            t = motion.duration
+    pieces.append(_Hold(first, float(dwell_s)))
+    intervals = [(t, t + float(dwell_s))]
+    t += float(dwell_s)
     seg_times = []
-    t = float(dwell_s)
-    for i, w in enumerate(waypoints):
+    for i, w in enumerate([] if lone else waypoints):
         motion = time_segment(i, w, n)
         if motion is not None:
             pieces.append(motion)
@@ -552,7 +570,22 @@ def assemble_trajectory(
         pieces.append(_Hold(w[-1], float(dwell_s)))
         intervals.append((t, t + dwell_s))
         t += dwell_s
+    if retreat is not None:
+        path = _transfer(retreat, n, "retreat")
+        if np.max(np.abs(path[0] - last)) > JOINT_TOLERANCE:
+            raise ValueError("the retreat does not start at the last landmark")
+        motion = time_segment(len(waypoints) - (1 if lone else 0), path, n)
+        if motion is not None:
+            pieces.append(motion)
     return Trajectory(pieces, intervals, seg_times, joint_names)
+
+
+def _transfer(waypoints: ArrayLike, n: int, name: str) -> Array:
+    """An approach or retreat as a finite (K ≥ 2, n) array, or ValueError naming it."""
+    path = np.asarray(waypoints, float)
+    if path.ndim != 2 or path.shape[0] < 2 or path.shape[1] != n or not np.isfinite(path).all():
+        raise ValueError(f"the {name} must be a finite (K ≥ 2, {n}) array of joint angles, got {path.shape}")
+    return path
 
 
 def _check_segments(segments: Sequence[ArrayLike]) -> tuple[list[Array], int, bool]:

@@ -31,7 +31,14 @@ from numpy.typing import NDArray
 
 from optlight.errors import SolverError
 from optlight.geometry import LightSphere
-from optlight.planning.nlp import arc_rows, ipopt_options, light_rows, pin_rows, tangent_basis
+from optlight.planning.nlp import (
+    arc_rows,
+    environment_rows,
+    ipopt_options,
+    light_rows,
+    pin_rows,
+    tangent_basis,
+)
 from optlight.planning.path import LightPath
 from optlight.setup import Setup
 from optlight.spec import SolverSpec
@@ -235,7 +242,7 @@ def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPR
             path_mode=setup.trajectory_spec.path,
             max_step=setup.trajectory_spec.max_step_rad,
             joint_weights=1.0 / setup.limits.velocity**2,
-            clearance=env.clearance_function(setup.robot) if env else None,
+            clearance=env.clearance_function(setup.robot) if env and env.collisions else None,
             view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
@@ -257,3 +264,61 @@ def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPR
             'larger max_step_rad or path = "free"'
         )
     return nlp
+
+
+#: Knots of a transfer (start → first landmark, last landmark → start) at most this far apart (rad).
+TRANSFER_STEP = 0.1
+
+#: Clearance (m) a transfer keeps at its interior knots beyond the environment's margins: the arm
+#: moves between knots, and its ends may sit exactly at a margin (a capture planned against it).
+TRANSFER_PADDING = 0.002
+
+
+def plan_transfer(setup: Setup, start: Array, goal: Array) -> Array:
+    """Joint angles (K, n) from ``start`` to ``goal`` (rad), both included, knots at most
+    :data:`TRANSFER_STEP` apart per joint: the light is off the sphere here, moving to or from the
+    captures.
+
+    The straight line in joint space when it keeps clear of the environment (collisions; and the view,
+    ``[view] mode = "path"``) at every knot, by the NLPs' sphere model; otherwise the transfer NLP
+    from that line: min Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the
+    velocity limits) s.t. the rows ≥ :data:`TRANSFER_PADDING` at the interior knots, joint limits and
+    the end points fixed.
+    Raises :class:`SolverError` when that fails."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    count = max(2, int(np.ceil(np.max(np.abs(goal - start)) / TRANSFER_STEP)) + 1)
+    line = start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)
+    environment = setup.environment
+    view = environment is not None and environment.view_mode == "path"
+    if environment is None or not (environment.collisions or view):
+        return line
+    robot = setup.robot
+
+    def rows(theta: Array) -> Array:
+        clearance, view_rows = environment.sphere_clearance(robot, theta)
+        return np.concatenate([clearance, view_rows if view else np.zeros(0)])
+
+    if all(rows(theta).min(initial=np.inf) >= TRANSFER_PADDING for theta in line[1:-1]):
+        return line
+    n, inner = robot.n, count - 2
+    x = ca.MX.sym("theta", n, inner)
+    ends = ca.MX.sym("ends", n, 2)
+    knots = ca.horzcat(ends[:, 0], x, ends[:, 1])
+    steps = knots[:, 1:] - knots[:, :-1]
+    weights = ca.DM(1.0 / setup.limits.velocity)
+    theta = ca.MX.sym("q", n)
+    row_function = ca.Function("transfer_rows", [theta], [environment_rows(environment, robot, theta, view=view)])
+    g = ca.vec(row_function.map(inner)(x))
+    nlp = {"x": ca.vec(x), "p": ca.vec(ends), "f": ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps), "g": g}
+    solver = ca.nlpsol("transfer", "ipopt", nlp, ipopt_options(setup.solver, ipopt__hessian_approximation="exact"))
+    lower = np.tile(robot.lower + LIMIT_MARGIN, inner)
+    upper = np.tile(robot.upper - LIMIT_MARGIN, inner)
+    x0 = np.clip(line[1:-1].ravel(), lower, upper)
+    out = solver(x0=x0, p=np.c_[start, goal].T.ravel(), lbx=lower, ubx=upper, lbg=TRANSFER_PADDING, ubg=np.inf)
+    inner_knots = np.asarray(out["x"]).reshape(inner, n)
+    if not solver.stats()["success"] or any(rows(t).min(initial=np.inf) < TRANSFER_PADDING - 1e-8 for t in inner_knots):
+        raise SolverError(
+            f"no transfer clear of the environment between the start configuration and the captures "
+            f"({solver.stats()['return_status']}); choose another [robot] start"
+        )
+    return np.vstack([start, inner_knots, goal])

@@ -315,6 +315,8 @@ class Robot:
         else:
             ref = _wrap_into_limits(np.asarray(theta_ref, float), self.lower, self.upper)
         self.theta_ref = ref
+        #: The SRDF's named configurations (group states), as joint angles θ; filled by load_robot.
+        self.named_configurations: dict[str, Array] = {}
         limits = (self.velocity_limit, self.acceleration_limit, self.jerk_limit)
         for arr in (self.lower, self.upper, *limits, self.theta_ref):
             arr.setflags(write=False)
@@ -457,9 +459,11 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
 
     # Reference configuration (full model), then lock the hand joints at 0.
     q_full = pin.neutral(full)
-    if srdf_path is not None and info.reference is not None:
+    states: dict[str, Array] = {}
+    if srdf_path is not None:
         pin.loadReferenceConfigurations(full, str(srdf_path))
         states = {e.key(): np.array(e.data()) for e in full.referenceConfigurations}
+    if info.reference is not None:
         if info.reference not in states:
             raise RobotError(f"{spec.name}: no reference configuration {info.reference!r} in {srdf_path}")
         q_full = states[info.reference]
@@ -521,13 +525,15 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         )
     )
 
+    def reduced_angles(q: Array) -> Array:
+        """θ of the reduced model from a configuration q of the full one."""
+        kept = [q[j.idx_q : j.idx_q + j.nq] for j in full.joints[1:] if full.names[j.id] not in locked]
+        return JointCoordinates(model).from_pin(np.concatenate(kept))
+
     # θ_ref: the SRDF state (reduced), the catalogue's default, or (user URDF) the limits' middle.
     theta_ref: Array | None = None
     if info.reference is not None:
-        q_red = np.concatenate(
-            [q_full[j.idx_q : j.idx_q + j.nq] for j in full.joints[1:] if full.names[j.id] not in locked]
-        )
-        theta_ref = JointCoordinates(model).from_pin(q_red)
+        theta_ref = reduced_angles(q_full)
     elif info.theta_ref is not None:
         theta_ref = np.asarray(info.theta_ref, float)
         if theta_ref.shape != (model.nv,):
@@ -542,7 +548,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if arr.ndim and arr.shape not in ((1,), (model.nv,)):
             raise RobotError(f"robot.{name}: {arr.size} values for the {model.nv} joints of {spec.name}")
         limits[name] = arr.ravel() if arr.shape != (1,) else arr[0]
-    return Robot(
+    robot = Robot(
         spec.name,
         model,
         theta_ref=theta_ref,
@@ -554,3 +560,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         package_dirs=package_dirs,
         locked_joints=locked,
     )
+    robot.named_configurations = {
+        name: _wrap_into_limits(reduced_angles(q), robot.lower, robot.upper) for name, q in states.items()
+    }
+    return robot

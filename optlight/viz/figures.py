@@ -69,6 +69,7 @@ def plot_landmarks_polar(
     fig = Figure(figsize=(5.2, 5.2))
     ax = _polar_axes(fig, r_max)
     az, zen = landmarks.azimuths, np.degrees(landmarks.zeniths)
+    _shade_view(ax, landmarks.view_zenith)
     if fixed_zenith is not None:
         circle = np.linspace(0, 2 * np.pi, 361)
         ax.plot(circle, np.full_like(circle, math.degrees(fixed_zenith)), color="0.6", lw=0.8)
@@ -87,6 +88,24 @@ def plot_landmarks_polar(
     ax.set_title(f"Landmarks ({len(landmarks)}, {landmarks.mode} mode): radius = zenith (deg)", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8, frameon=False)
     return _save(fig, path)
+
+
+def _shade_view(ax: PolarAxes, view_zenith: float) -> None:
+    """Hatch the lights the camera's view takes away (zenith < ``view_zenith``, rad): there the
+    light's housing would stand in front of the lens."""
+    if view_zenith <= 0:
+        return
+    circle = np.linspace(0, 2 * np.pi, 361)
+    ax.fill_between(
+        circle,
+        0.0,
+        math.degrees(view_zenith),
+        facecolor="0.85",
+        edgecolor="0.5",
+        hatch="//",
+        lw=0.0,
+        label=f"in the camera's view (< {math.degrees(view_zenith):.1f}°)",
+    )
 
 
 def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[int] | None = None) -> Path:
@@ -152,6 +171,9 @@ def plot_cost_map(landmarks: LandmarkSet, path: str | Path, r_max: float) -> Pat
         cmap="viridis_r",
     )
     ax.plot(landmarks.azimuths, np.degrees(landmarks.zeniths), "o", mfc="none", color="tab:red", ms=6)
+    if landmarks.view_zenith > 0:
+        circle = np.linspace(0, 2 * np.pi, 361)
+        ax.plot(circle, np.full_like(circle, math.degrees(landmarks.view_zenith)), "--", color="white", lw=1.0)
     width, height = landmarks.resolution
     ax.set_title(f"Sweep cost (search renders {width}×{height}), landmarks in red", fontsize=10)
     fig.colorbar(mesh, ax=ax, pad=0.1, shrink=0.8, label="cost")
