@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment import Environment
-from optlight.errors import SolverError, UnreachableError
+from optlight.errors import IPOPT_ITERATION_LIMIT, SolverError, UnreachableError, iteration_limit_error
 from optlight.geometry import LightSphere
 from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
 from optlight.planning.path import LightPath, azimuth_order, build_path, shortest_open_tour
@@ -271,6 +271,8 @@ def place_landmarks(
                 f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
             )
             continue
+        if placed.status == IPOPT_ITERATION_LIMIT:
+            raise iteration_limit_error(f"the placement NLP of landmark {lm.index}", problem.solver.max_iter)
         clear_of = " clear of the environment" if environment is not None else ""
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
@@ -351,6 +353,8 @@ def optimize_knots(
         if not nlp.success and start is not warm:
             nlp = constrained.solve(path, sphere, warm)
         nlp = replace(nlp, time_s=nlp.time_s + free_time)
+    if not nlp.success and nlp.status == IPOPT_ITERATION_LIMIT:
+        raise iteration_limit_error("the trajectory NLP", problem.solver.max_iter)
     if not nlp.success:
         raise SolverError(
             f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
