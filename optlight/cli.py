@@ -12,8 +12,11 @@ and results go to stdout. Ctrl-C at any moment exits with status 130 and leaves 
 from __future__ import annotations
 
 import argparse
+import importlib
+import logging
 import math
 import os
+import signal
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -30,6 +33,23 @@ from optlight.spec import available_problems, load_problem, resolve_problem_path
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
+#: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
+#: import can break a library for the rest of the run (trimesh catches it while importing an optional
+#: part and leaves an error wrapper where a class should be).
+MODULES = {
+    "check": ("optlight.preflight",),
+    "render": ("optlight.preflight", "optlight.export", "optlight.viz.images"),
+    "reach": ("optlight.preflight", "optlight.export", "optlight.robot"),
+    "solve": (
+        "optlight.preflight",
+        "optlight.export",
+        "optlight.pipeline",
+        "optlight.report",
+        "optlight.viz.preview",
+        "rich.progress",
+        "rich.table",
+    ),
+}
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
@@ -274,28 +294,56 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status (0, 2 for a user mistake, 130
     after Ctrl-C).
 
-    As the console script (``argv`` None), once the command has finished a Ctrl-C while Python shuts
-    down (atexit callbacks of matplotlib, meshcat, rich) ends the process with 130 at once instead of
-    printing "Exception ignored … KeyboardInterrupt"."""
-    with interrupts.latched(then=_exit_interrupted if argv is None else None):
+    As the console script (``argv`` None) it ends the process itself once the command is done:
+    SIGINT blocked, streams flushed, ``os._exit``. A Ctrl-C in Python's own shutdown (atexit
+    callbacks, freeing the libraries) would otherwise print "Exception ignored … KeyboardInterrupt"
+    or kill the process with the signal instead of the exit status of the finished command.
+    """
+    # Libraries' log records (trimesh's "unable to use sparse matrix, falling back!" with a traceback)
+    # are not for the user: without a handler Python would print warnings and worse on stderr.
+    root = logging.getLogger()
+    if not any(isinstance(h, logging.NullHandler) for h in root.handlers):
+        root.addHandler(logging.NullHandler())
+    with interrupts.latched():
         try:
-            args = build_parser().parse_args(argv)
-            return int(args.func(args))
-        except VerificationError as e:  # its report's lines follow the first
-            print(f"optlight: error: {e}", file=sys.stderr)
-            return 2
-        except OptlightError as e:
-            print(f"optlight: error: {' '.join(str(e).split())}", file=sys.stderr)
-            return 2
-        except KeyboardInterrupt:
-            print("optlight: interrupted", file=sys.stderr)
-            return 130
+            code = _run(argv)
+        except KeyboardInterrupt:  # landed after _run's own handlers
+            code = _interrupted()
+        finally:
+            if argv is None and interrupts.in_main_thread():
+                signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    if argv is None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
 
 
-def _exit_interrupted(signum: int, frame: object) -> None:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(130)
+def _run(argv: Sequence[str] | None) -> int:
+    """Parse the arguments, import what the command needs (Ctrl-C deferred), run it."""
+    try:
+        args = build_parser().parse_args(argv)
+        with interrupts.deferred():
+            for module in MODULES.get(args.command, ()):
+                importlib.import_module(module)
+        return int(args.func(args))
+    except VerificationError as e:  # its report's lines follow the first
+        print(f"optlight: error: {e}", file=sys.stderr)
+        return 2
+    except OptlightError as e:
+        print(f"optlight: error: {' '.join(str(e).split())}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return _interrupted()
+    except Exception:
+        if interrupts.pending():  # a library turned the interrupt into its own error (CasADi: RuntimeError)
+            return _interrupted()
+        raise
+
+
+def _interrupted() -> int:
+    print("optlight: interrupted", file=sys.stderr)
+    return 130
 
 
 if __name__ == "__main__":

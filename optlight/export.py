@@ -315,8 +315,9 @@ def write_folder(
     """
     target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
     staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
-    staging.mkdir()
     try:
+        with interrupts.deferred():  # created, then removed by the finally below: never left behind
+            staging.mkdir()
         files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
         names = sorted({str(f) for f in files})
         (staging / MANIFEST).write_text(
@@ -384,8 +385,9 @@ def _probe(folder: Path, option: str) -> None:
     """Refuse a folder where optlight cannot create (and remove) a staging folder."""
     probe = folder / f"{STAGING_PREFIX}probe-{uuid.uuid4().hex[:12]}"
     try:
-        probe.mkdir()
-        probe.rmdir()
+        with interrupts.deferred():  # never left behind
+            probe.mkdir()
+            probe.rmdir()
     except OSError as e:
         raise UsageError(option, f"cannot write in {folder} ({e.strerror or e})") from None
 

@@ -14,14 +14,12 @@ Signal handlers can only be set from the main thread; elsewhere both context man
 from __future__ import annotations
 
 import signal
+import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 from typing import Any
-
-#: A Python signal handler.
-Handler = Callable[[int, FrameType | None], object]
 
 _pending = False
 
@@ -43,10 +41,13 @@ def check() -> None:
 
 
 @contextmanager
-def latched(then: Handler | None = None) -> Iterator[None]:
+def latched() -> Iterator[None]:
     """Within the block SIGINT records itself, then raises KeyboardInterrupt as usual; the record
-    stays until the block ends, so :func:`check` raises it again after a library swallowed it. When
-    the block ends the handler in force before is restored, or ``then`` is installed."""
+    stays until the block ends, so :func:`check` raises it again after a library swallowed it.
+
+    Where Python cannot propagate it (a ``__del__``, a weakref callback during garbage collection)
+    it would print "Exception ignored in … KeyboardInterrupt"; that report is dropped, since
+    :func:`check` raises the interrupt again."""
     global _pending
     if not in_main_thread():
         yield
@@ -57,20 +58,28 @@ def latched(then: Handler | None = None) -> Iterator[None]:
         _pending = True
         raise KeyboardInterrupt
 
+    report = sys.unraisablehook
+
+    def unraisable(info: Any) -> None:
+        if not (_pending and isinstance(info.exc_value, KeyboardInterrupt)):
+            report(info)
+
     previous = signal.signal(signal.SIGINT, handler)
+    sys.unraisablehook = unraisable
     _pending = False
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, then if then is not None else previous)
+        signal.signal(signal.SIGINT, previous)
+        sys.unraisablehook = report
         _pending = False
 
 
 @contextmanager
 def deferred() -> Iterator[None]:
-    """Within the block SIGINT is only recorded; when the block has finished, it is handed to the
-    handler in force before (which raises KeyboardInterrupt, unless SIGINT was ignored). A pending
-    interrupt is raised before the block starts."""
+    """Within the block SIGINT is only recorded; when the block has finished (or raised), it is
+    handed to the handler in force before (which raises KeyboardInterrupt, unless SIGINT was
+    ignored). A pending interrupt is raised before the block starts."""
     check()
     if not in_main_thread():
         yield
@@ -86,8 +95,8 @@ def deferred() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-    if not arrived or previous is signal.SIG_IGN:
-        return
-    if callable(previous):
-        previous(signal.SIGINT, None)  # Python's default handler or latched()'s: raises KeyboardInterrupt
-    raise KeyboardInterrupt
+        # also when the block raised: the user's interrupt wins over the block's error
+        if arrived and previous is not signal.SIG_IGN:
+            if callable(previous):
+                previous(signal.SIGINT, None)  # Python's default handler or latched()'s: raises
+            raise KeyboardInterrupt
