@@ -54,6 +54,9 @@ Progress = Callable[[str, int, int], None]
 
 STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
 
+#: Said of a placement NLP that stopped at its iteration limit: it may have needed more, not a reach.
+_LIMIT_HINT = " at [solver] max_iter: raise it if the landmark should be reachable"
+
 
 @dataclass(frozen=True)
 class Plan:
@@ -271,14 +274,12 @@ def place_landmarks(
                 f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
             )
             continue
-        if placed.status == IPOPT_ITERATION_LIMIT:
-            raise iteration_limit_error(f"the placement NLP of landmark {lm.index}", problem.solver.max_iter)
         clear_of = " clear of the environment" if environment is not None else ""
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
             f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear_of} within "
             f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
-            f"(placement NLP: {placed.message})"
+            f"(placement NLP: {placed.message}{_LIMIT_HINT if placed.status == IPOPT_ITERATION_LIMIT else ''})"
         )
         if not problem.landmarks.allow_partial:
             raise UnreachableError(
