@@ -128,7 +128,10 @@ def report_markdown(plan: Plan, figures: Sequence[str]) -> str:
 
 
 def save_plan(plan: Plan, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
-    """Write the results folder of a verified plan (see the module docstring); returns the paths."""
+    """Write the results folder of a verified plan (see the module docstring); returns the paths.
+
+    ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
+    the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
     robot = plan.robot
     spec = plan.problem.robot
     timed = plan.trajectory.sample(plan.trajectory.sample_times(20.0))[0]
