@@ -1,4 +1,6 @@
 # The newcomer's two commands: `make demo` and `make test`. Both create .venv when it is missing.
+# `make demo` passes --force: it may replace the results of its own earlier runs in $(OUT) (only the
+# files optlight wrote there; see optlight/export.py).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -14,7 +16,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/optlight solve default --out $(OUT)
+	$(BIN)/optlight solve default --out $(OUT) --force
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q

@@ -169,7 +169,12 @@ class RobotSpec:
     name: str = key(
         "panda", "robot name (panda, ur3, ur5, ur10, xarm7, kinova, z1), or a label when urdf is set"
     )
-    urdf: str | None = key(None, "path of a user URDF instead of a named robot")
+    urdf: str | None = key(
+        None,
+        "path of a user URDF instead of a named robot; its package://NAME/… meshes are looked up as "
+        "ROS does: a folder NAME (or one holding NAME/package.xml) in the URDF's folder or any folder "
+        "above it, then in each folder of the ROS_PACKAGE_PATH environment variable",
+    )
     frame: str | None = key(None, "flange frame the light is attached to (default: the robot's tool frame)")
     base_position_m: Vec3 = key((0.0, 0.0, 0.0), "robot base position in the world frame", unit="m")
     base_rpy_deg: Vec3 = key((0.0, 0.0, 0.0), "robot base roll, pitch, yaw in the world frame", unit="deg")
@@ -291,7 +296,11 @@ class TrajectorySpec:
     )
     max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
     dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
-    image_pattern: str = key("img_{index:03d}.png", "image file names written into lights.lp and captures.csv")
+    image_pattern: str = key(
+        "img_{index:03d}.png",
+        "image file names written into lights.lp and captures.csv: a Python format string of {index} "
+        "(0, 1, …) giving distinct names without whitespace",
+    )
     timing: Literal["jerk_limited", "toppra"] = key(
         "jerk_limited",
         "time each segment with continuous acceleration under the jerk limits, or time-optimally with "
@@ -536,6 +545,86 @@ class Problem:
 
 
 # --------------------------------------------------------------------------------------------
+# What a run will need: image names, memory
+# --------------------------------------------------------------------------------------------
+
+
+def image_names(pattern: str, count: int) -> list[str]:
+    """``pattern.format(index=i)`` for i = 0 … count−1; names must be distinct and free of whitespace
+    (lights.lp separates fields by spaces). Raises ValueError saying what is wrong."""
+    try:
+        names = [pattern.format(index=i) for i in range(count)]
+    except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
+        raise ValueError(f"image pattern {pattern!r} must format with only {{index}} ({e!r})") from None
+    if len(set(names)) != len(names):
+        raise ValueError(f"image pattern {pattern!r} gives repeated names; use {{index}}")
+    bad = [n for n in names if not n or any(c.isspace() for c in n)]
+    if bad:
+        raise ValueError(f"image names may not be empty or contain whitespace (.lp format): {bad[0]!r}")
+    return names
+
+
+#: Peak memory of a solve, measured as the growth of ru_maxrss on the default problem (whole solves
+#: at 256²–1024² pixels with 32 bins; the landmark search at 512² with 32–1024 bins): a fixed part
+#: (the libraries, the robot, the NLPs) plus, per object pixel at the camera's resolution, about 800
+#: bytes (rays, G-buffer, the CasADi luminance model's constant matrices) and 72 bytes per histogram
+#: bin (the soft histogram's pixels × bins arrays). The constants below round those up; every image
+#: pixel is counted as an object pixel, since the object may fill the image.
+MEMORY_BASE_BYTES = 600e6
+MEMORY_BYTES_PER_PIXEL = 1200.0
+MEMORY_BYTES_PER_PIXEL_BIN = 80.0
+#: Fraction of the available memory a run may plan to use (the rest: other processes, estimate error).
+MEMORY_SAFETY = 0.8
+
+
+def estimated_peak_memory(problem: Problem) -> float:
+    """Bytes a solve of ``problem`` is expected to hold at its peak (see :data:`MEMORY_BASE_BYTES`):
+    base + W·H·(per pixel + per pixel and bin · objective.bins)."""
+    pixels = problem.camera.width * problem.camera.height
+    per_pixel = MEMORY_BYTES_PER_PIXEL + MEMORY_BYTES_PER_PIXEL_BIN * problem.objective.bins
+    return MEMORY_BASE_BYTES + pixels * per_pixel
+
+
+def available_memory() -> float | None:
+    """Bytes of memory a new allocation can get without swapping: MemAvailable from /proc/meminfo
+    (Linux), else the free physical pages (``os.sysconf``); None where neither is known."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(problem: Problem) -> None:
+    """Raise :class:`ProblemError` (key ``camera.width``) when the solve's estimated peak memory
+    (:func:`estimated_peak_memory`) exceeds :data:`MEMORY_SAFETY` of the memory available now;
+    unchecked where that is unknown. A check of this machine, not of the file: it runs where the
+    problem is built (:class:`optlight.setup.Setup`), not when the file is loaded, so a problem
+    loaded on one machine can be solved on another with more memory."""
+    available = available_memory()
+    need = estimated_peak_memory(problem)
+    if available is None or need <= MEMORY_SAFETY * available:
+        return
+    cam = problem.camera
+    raise ProblemError(
+        str(problem.source) if problem.source else "<inline>",
+        "camera.width",
+        f"a camera.width × camera.height image whose solve fits in memory: {cam.width} × {cam.height} "
+        f"pixels with {problem.objective.bins} objective.bins needs about {need / 1e9:.1f} GB, "
+        f"{available / 1e9:.1f} GB is available; lower camera.width and camera.height",
+        cam.width,
+    )
+
+
+# --------------------------------------------------------------------------------------------
 # Loading
 # --------------------------------------------------------------------------------------------
 
@@ -644,12 +733,12 @@ def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ProblemError(file, where, "an integer", value)
-        _check_range(float(value), meta, where, file)
+        _check_range(value, meta, where, file)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ProblemError(file, where, "a finite number", value)
-        _check_range(float(value), meta, where, file)
+        _check_range(value, meta, where, file)
         return float(value)
     if tp is str:
         if not isinstance(value, str):
@@ -659,6 +748,7 @@ def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
 
 
 def _check_range(x: float, meta: Any, where: str, file: str) -> None:
+    """``x`` (as the file wrote it, int or float) within the key's declared range."""
     lo, hi, lo_open = meta.get("lo"), meta.get("hi"), meta.get("lo_open", False)
     unit = f" {meta.get('unit')}" if meta.get("unit") else ""
     if lo is not None and (x < lo or (lo_open and x == lo)):
@@ -740,6 +830,15 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+    try:
+        image_names(p.trajectory.image_pattern, p.landmarks.count)
+    except ValueError as e:
+        raise ProblemError(
+            file,
+            "trajectory.image_pattern",
+            f'distinct file names from {{index}}, e.g. "img_{{index:03d}}.png" ({e})',
+            p.trajectory.image_pattern,
+        ) from None
     traj = p.trajectory
     if traj.settle_s >= traj.dwell_s:
         raise ProblemError(
