@@ -102,6 +102,39 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
     ]
 
 
+def _cmd_acquire(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from optlight.acquisition import acquire
+
+    console = Console(stderr=True)
+    out = Path(args.out)
+    if out.exists() and not (out.is_dir() and not any(out.iterdir())):
+        raise OptlightError(f"{out} exists and is not empty; choose another --out")
+    problem = load_problem(args.problem)
+    with console.status("") as status:
+
+        def progress(iteration: int, stage: str, done: int, total: int) -> None:
+            status.update(f"iteration {iteration}: {stage} {done}/{total}")
+
+        with warnings.catch_warnings(record=True):
+            acquisition = acquire(problem, args.camera, images=args.images, progress=progress)
+    for it in acquisition.iterations:
+        console.print(
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
+            f"{it.wall_time_s:.1f} s"
+        )
+    best = acquisition.best
+    console.print(
+        f"{acquisition.status}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
+        f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
+    )
+    with console.status(f"writing {out}/"):
+        acquisition.save(out)
+    console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
+    return 0
+
+
 def _cmd_reach(args: argparse.Namespace) -> int:
     from optlight.planning.reach import reachability_map
     from optlight.setup import Setup
@@ -163,6 +196,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--view", action="store_true", help="serve the live Meshcat preview on 127.0.0.1 afterwards"
     )
+    p = add("acquire", _cmd_acquire, "camera in the loop: plan, capture, calibrate, re-plan; write the dataset")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--camera", choices=("model", "mitsuba", "folder"), default="model", help="what captures")
+    p.add_argument("--images", help="folder with captures.csv and the images (--camera folder)")
+    p.add_argument("--out", required=True, help="dataset folder (must not exist, or be empty)")
     p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
     p.add_argument("problem", help="problem file path or built-in name")
     p.add_argument("--out", required=True, help="output folder for reachability.png and reachability.json")

@@ -72,7 +72,8 @@ class Calibration:
     photometric stereo's where ``normals_valid``, the mesh's elsewhere (None with fewer than 3 used
     captures); ``normal_deviation_deg``: median angle between them and the mesh's; ``used``: indices of
     the captures fitted; ``rejected``: index → why it was left out; ``entries``: how many (capture,
-    pixel) entries were used, saturated, shadowed (edges and cast shadows) and specular;
+    pixel) entries were used, saturated, shadowed (edges and cast shadows) and specular; ``specular``
+    (len(used), P): the entries left out as specular;
     ``residual_rms``: of Y − Ŷ over the used entries (renderer units)."""
 
     power: float
@@ -87,6 +88,7 @@ class Calibration:
     rejected: dict[int, str]
     entries: dict[str, int]
     residual_rms: float
+    specular: NDArray[np.bool_]
 
     def light(self, model: LightSpec) -> LightSpec:
         """The model's light with the calibrated power and ambient."""
@@ -203,6 +205,7 @@ def calibrate(scene: Scene, captures: Sequence[Capture], spec: LoopSpec) -> Cali
             "specular": int(specular.sum()),
         },
         residual_rms=float(np.sqrt(fit.cost / max(int(weights.sum()), 1))),
+        specular=specular,
     )
 
 

@@ -23,6 +23,7 @@ Camera: Mitsuba's camera frame is (left, up, forward) where ours is OpenCV's (ri
 so ``to_world`` is [x y z]·diag(−1, −1, 1); the vertical field of view is 2 atan(H/(2 f_y)) and the
 principal point offset is −(c − (N − 1)/2)/N of the image size on each axis (pixel centres at integers
 in our convention). A box pixel filter averages over the pixel, where our renderer samples its centre.
+Emitters seen directly are hidden: the background is 0, as in our renderer.
 Square pixels (f_x = f_y) only.
 """
 
@@ -195,7 +196,7 @@ class MitsubaCamera:
         mi = self.mi
         scene = {
             "type": "scene",
-            "integrator": {"type": "path", "max_depth": self.world.bounces + 1},
+            "integrator": {"type": "path", "max_depth": self.world.bounces + 1, "hide_emitters": True},
             "sensor": {**self._sensor, "sampler": {"type": "independent", "sample_count": spp}},
             "object": self._shape,
             "light": emitter,
