@@ -16,9 +16,10 @@ dataset folder.
 4. the model is calibrated from every usable capture so far (:func:`~optlight.capture.calibration.calibrate`)
    and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
    through the same :func:`optlight.solve`;
-5. the loop stops after ``[loop] iterations`` plans, or as soon as a plan's measured cost is not at
-   least ``[loop] tolerance`` (relative) below the best so far. The best plan by measured cost is
-   the result; the first plan is the open loop's.
+5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
+   least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails (the planner's
+   error is the status; the first plan's error is raised). The best plan by measured cost is the
+   result; the first plan is the open loop's.
 
 With a folder camera the images exist only for the plan the robot ran: the loop captures that
 plan, calibrates, re-plans, and stops with status ``awaiting captures`` and the next plan
@@ -163,7 +164,7 @@ class Iteration:
 class Acquisition:
     """The result of :func:`acquire`: the problem's ``setup``, the ``camera`` kind, every round in
     ``iterations``, why the loop stopped (``status``: "stopped improving", "iteration limit",
-    "awaiting captures", "calibration failed") and, with a folder camera, the ``next_plan`` to run."""
+    "awaiting captures", "calibration failed", "re-plan failed (…)") and, with a folder camera, the ``next_plan`` to run."""
 
     setup: Setup
     camera: str
@@ -335,7 +336,13 @@ def acquire(
     status, next_plan, best = "iteration limit", None, np.inf
     for i in range(spec.iterations):
         start = time.perf_counter()
-        plan = solve(model, progress=_stage_progress(notify, i))
+        try:
+            plan = solve(model, progress=_stage_progress(notify, i))
+        except OptlightError as e:
+            if i == 0:
+                raise
+            status = f"re-plan failed ({e})"
+            break
         if not plan.verification.passed:
             raise VerificationError(
                 f"iteration {i}: the plan failed verification; the robot does not run it\n{plan.verification.summary()}",
@@ -426,7 +433,7 @@ def photometric_servo(
     scene, sphere, robot = model.scene, model.sphere, model.robot
     judge = measure or model
     index = judge.scene.gbuffer.pixel_index
-    gradient, jacobian = _servo_functions(model)
+    gradient, jacobian = servo_functions(model)
     lo, hi = sphere.zenith_min, sphere.zenith_max
 
     def reach(z: float, a: float, start: Array | None) -> tuple[Array, Array] | None:
@@ -470,7 +477,7 @@ def photometric_servo(
     )
 
 
-def _servo_functions(model: Setup) -> tuple[ca.Function, ca.Function]:
+def servo_functions(model: Setup) -> tuple[ca.Function, ca.Function]:
     """∇_I J (I ↦ P-vector) of the objective, and ∂I/∂(θ, φ) (θ, φ, v ↦ P×2) of the model's
     differentiable luminance (smooth max and clip, the calibrated response)."""
     scene, objective = model.scene, model.objective
