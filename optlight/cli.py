@@ -42,6 +42,7 @@ MODULES = {
     "check": ("optlight.preflight",),
     "render": ("optlight.scene", "optlight.export", "optlight.viz.images"),
     "reach": ("optlight.preflight", "optlight.export", "optlight.planning.reach"),
+    "acquire": ("optlight.preflight", "optlight.export", "optlight.acquisition", "rich.console"),
     "solve": (
         "optlight.preflight",
         "optlight.export",
@@ -153,6 +154,46 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
     ]
 
 
+def _cmd_acquire(args: argparse.Namespace) -> int:
+    from rich.console import Console
+
+    from optlight.acquisition import acquire
+    from optlight.export import check_output_folder
+    from optlight.preflight import preflight
+
+    if args.camera == "folder" and args.images is None:
+        raise UsageError("--images", "the folder camera (--camera folder) needs the folder of the captured images")
+    out = Path(args.out)
+    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
+    problem = load_problem(args.problem)
+    console = Console()  # stdout: stderr carries only the one-line error of a failed run
+    with console.status("building the scene, objectives, robot and environment"):
+        setup = preflight(problem)  # built once: the loop's first plan uses it as it is
+    with console.status("") as status:
+
+        def progress(iteration: int, stage: str, done: int, total: int) -> None:
+            interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
+            status.update(f"iteration {iteration}: {stage} {done}/{total}")
+
+        with warnings.catch_warnings(record=True):
+            acquisition = acquire(setup, args.camera, images=args.images, progress=progress)
+    interrupts.check()
+    for it in acquisition.iterations:
+        console.print(
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
+            f"{it.wall_time_s:.1f} s"
+        )
+    best = acquisition.best
+    console.print(
+        f"{acquisition.status}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
+        f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
+    )
+    with console.status(f"writing {out}/"):
+        acquisition.save(out, overwrite=args.force)
+    console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
+    return 0
+
+
 def _cmd_reach(args: argparse.Namespace) -> int:
     from optlight.export import check_output_folder, write_folder
     from optlight.planning.reach import reachability_map
@@ -245,6 +286,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--view", action="store_true", help="serve the live Meshcat preview on 127.0.0.1 afterwards"
     )
+    p = add("acquire", _cmd_acquire, "camera in the loop: plan, capture, calibrate, re-plan; write the dataset")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--camera", choices=("model", "mitsuba", "folder"), default="model", help="what captures")
+    p.add_argument("--images", help="folder with captures.csv and the images (--camera folder)")
+    p.add_argument("--out", required=True, help="dataset folder, new or empty")
+    p.add_argument("--force", action="store_true", help=force_help)
     p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
     p.add_argument("problem", help="problem file path or built-in name")
     p.add_argument(

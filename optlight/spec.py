@@ -510,6 +510,88 @@ class LightSetSpec:
 
 
 @dataclass(frozen=True)
+class WorldSpec:
+    """How the real scene differs from the model (DESIGN §11): what the model and physically based
+    cameras of the camera-in-the-loop capture (:mod:`optlight.capture`), never what the planner
+    assumes. Every default is the model itself (a Lambertian object, the exact light, no
+    inter-reflection, a linear camera without noise)."""
+
+    power_scale: float = key(1.0, "real light power over the model's light.power", lo=0.0)
+    ambient: float | None = key(None, "real ambient k_amb (default: the model's light.ambient)", lo=0.0)
+    albedo_scale: float = key(1.0, "factor on the model's albedo", lo=0.0)
+    albedo_texture: float = key(
+        0.0, "relative amplitude of a multiplicative albedo texture, 1 + t·sin·sin·sin of the position", lo=0.0, hi=1.0
+    )
+    texture_period_m: float = key(0.04, "period of the albedo texture", unit="m", lo=0.0, lo_open=True)
+    bsdf: Literal["lambertian", "roughplastic", "principled"] = key(
+        "lambertian", "reflectance of the real surface (the physically based camera; the model camera is Lambertian)"
+    )
+    roughness: float = key(0.3, "surface roughness (roughplastic α, principled roughness)", lo=0.0, hi=1.0, lo_open=True)
+    specular: float = key(
+        0.5, "specular strength (roughplastic specular reflectance, principled specular)", lo=0.0, hi=1.0
+    )
+    light_offset_m: Vec3 = key(
+        (0.0, 0.0, 0.0), "where the real light is, relative to where the robot puts it (world frame)", unit="m"
+    )
+    light_radius_m: float = key(
+        0.0, "radius of the real light's emitting area (0: a point; the physically based camera)", unit="m", lo=0.0
+    )
+    light_profile: Literal["isotropic", "lambertian", "spot"] = key(
+        "isotropic",
+        "angular emission: the same in every direction (point, sphere), cos of the angle to the light's axis "
+        "(a disk facing the object), or a spot beam (point)",
+    )
+    spot_cutoff_deg: float = key(
+        40.0, "half-angle where the spot beam ends (light_profile = spot)", unit="deg", lo=0.0, hi=90.0, lo_open=True
+    )
+    gamma: float = key(1.0, "camera response: recorded value s·(I/s)^(1/gamma)", lo=0.0, lo_open=True)
+    noise_std: float = key(0.0, "sensor noise σ, pixel units, added before the response", lo=0.0)
+    seed: int = key(0, "seed of the sensor noise and of the physically based camera's samples")
+    bounces: int = key(
+        1, "light bounces the physically based camera traces (1: direct light only; more: inter-reflections)", lo=1, hi=32
+    )
+    spp: int = key(64, "samples per pixel of the physically based camera", lo=1, hi=65536)
+
+
+@dataclass(frozen=True)
+class LoopSpec:
+    """The camera in the loop (DESIGN §11): plan, capture at the landmarks, calibrate the model from
+    the captures, re-plan on the calibrated model, until the measured objective stops improving."""
+
+    iterations: int = key(4, "most plan-capture-calibrate rounds (the first is the open-loop plan)", lo=1, hi=50)
+    tolerance: float = key(
+        0.02, "relative decrease of the measured objective below which the loop stops", lo=0.0, hi=1.0
+    )
+    normals: Literal["model", "photometric_stereo"] = key(
+        "model",
+        "normals of the calibrated model: the mesh's, or photometric stereo's where 3 or more lights light a pixel",
+    )
+    saturation_level: float = key(
+        0.98, "normalised camera value from which a pixel counts as saturated (left out of the fit)", lo=0.0, hi=1.0,
+        lo_open=True,
+    )
+    dark_level: float = key(
+        0.02, "normalised camera value below which a whole capture counts as black (its 99th percentile)", lo=0.0, hi=1.0
+    )
+    max_saturated_fraction: float = key(
+        0.5, "a capture with more of its object pixels saturated is left out of the calibration", lo=0.0, hi=1.0,
+        lo_open=True,
+    )
+    min_cosine: float = key(
+        0.1, "smallest modelled shading v·max(0, n·l) of a lit pixel in the fit; dimmer lit pixels (shadow edges) are left out",
+        lo=0.0, hi=1.0,
+    )
+    specular_mad: float = key(
+        3.0, "pixels brighter than the fit by more than this many robust deviations (MAD) count as specular", lo=0.0,
+        lo_open=True,
+    )
+    servo_steps: int = key(8, "captures of the local photometric servo", lo=1, hi=1000)
+    servo_step_deg: float = key(
+        4.0, "first step of the photometric servo along the light sphere", unit="deg", lo=0.0, hi=45.0, lo_open=True
+    )
+
+
+@dataclass(frozen=True)
 class Problem:
     """A whole light-positioning problem."""
 
@@ -525,6 +607,8 @@ class Problem:
     solver: SolverSpec = section(SolverSpec, "numerical settings")
     environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
     lightset: LightSetSpec = section(LightSetSpec, "lights designed as a set (photometric stereo, RTI, grid)")
+    world: WorldSpec = section(WorldSpec, "how the real scene differs from the model (the cameras in the loop)")
+    loop: LoopSpec = section(LoopSpec, "the camera in the loop: capture, calibrate, re-plan")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property
@@ -863,6 +947,14 @@ def _check_consistency(p: Problem, file: str) -> None:
             light.housing_length_m,
         )
     _check_lightset(p, file)
+    if p.world.light_profile == "spot" and p.world.light_radius_m > 0:
+        raise ProblemError(
+            file, "world.light_radius_m", "0 for a spot beam (light_profile = 'spot' is a point light)", p.world.light_radius_m
+        )
+    if p.world.light_radius_m >= ls.radius_m:
+        raise ProblemError(
+            file, "world.light_radius_m", f"a light smaller than the light sphere (< {ls.radius_m:g} m)", p.world.light_radius_m
+        )
 
 
 def _check_lightset(p: Problem, file: str) -> None:

@@ -29,6 +29,7 @@ LAYERS: list[set[str]] = [
     {"scene", "robot"},
     {"objectives", "environment", "photometric_stereo"},
     {"setup"},
+    {"capture"},
     {"planning"},
     {"verify"},
     {"export"},
@@ -37,6 +38,7 @@ LAYERS: list[set[str]] = [
     {"report"},
     {"plan"},
     {"pipeline", "preflight"},
+    {"acquisition"},
     {"cli"},
 ]
 
