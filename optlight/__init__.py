@@ -28,6 +28,8 @@ from optlight.geometry import LightSphere
 from optlight.spec import Problem, available_problems, load_problem, problem_from_dict
 
 if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks they agree)
+    from optlight.batch import BatchResult, run_batch
+    from optlight.cell import CellResult, design_cell
     from optlight.objectives import Objective
     from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
@@ -70,6 +72,10 @@ _LAZY = {
     "verify_trajectory": "optlight.verify",
     "Plan": "optlight.plan",
     "solve": "optlight.pipeline",
+    "BatchResult": "optlight.batch",
+    "run_batch": "optlight.batch",
+    "CellResult": "optlight.cell",
+    "design_cell": "optlight.cell",
     "Preview": "optlight.viz.preview",
     "save_gray_png": "optlight.viz.images",
 }

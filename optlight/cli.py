@@ -117,6 +117,28 @@ def _cmd_reach(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from optlight.batch import run_batch
+
+    result = run_batch(args.spec, args.out, scheduler=args.scheduler, workers=args.workers)
+    skipped = f", {result.skipped} done before" if result.skipped else ""
+    print(f"{result.ok} of {len(result.records)} rows solved ({result.failed} failed{skipped}) in {result.elapsed_s:.1f} s")
+    for record in result.records:
+        if record.status != "ok":
+            print(f"failed {record.id}: {record.error}", file=sys.stderr)
+    print(f"results: {result.table_md} and {result.table_csv}")
+    return 1 if result.failed else 0
+
+
+def _cmd_cell(args: argparse.Namespace) -> int:
+    from optlight.cell import design_cell
+
+    result = design_cell(args.spec, args.out, scheduler=args.scheduler, workers=args.workers)
+    for line in result.summary_lines():
+        print(line)
+    return 0
+
+
 def _cmd_problems(args: argparse.Namespace) -> int:
     problems = available_problems()
     width = max((len(n) for n in problems), default=0)
@@ -173,12 +195,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--zenith", type=float, required=True, help="light zenith, degrees from the camera axis")
     p.add_argument("--azimuth", type=float, required=True, help="light azimuth, degrees (90 = from above)")
     p.add_argument("--out", required=True, help="output PNG file")
+    p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
+    p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
+    p.add_argument("--out", required=True, help="output folder: plans/, records/, results.csv, results.md")
+    _add_engine_arguments(p)
+    p = add("cell", _cmd_cell, "search the robot's (and the camera's) placement for the most lights reached")
+    p.add_argument("spec", help="cell spec file (TOML): a base problem and the ranges to search")
+    p.add_argument("--out", required=True, help="output folder: heat map, candidates, best_problem.toml")
+    _add_engine_arguments(p)
     add("problems", _cmd_problems, "list the built-in problems")
     p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
     p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")
     p.add_argument("--quick", action="store_true", help="reduced sizes and one solve per problem (CI)")
     p.add_argument("--out", metavar="DIR", help="output folder (default benchmarks/results)")
     return parser
+
+
+def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="remote Dask scheduler (default: a local cluster on 127.0.0.1)"
+    )
+    p.add_argument("--workers", type=int, metavar="N", help="local cluster worker processes (default: one per core)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -37,6 +37,8 @@ LAYERS: list[set[str]] = [
     {"report"},
     {"plan"},
     {"pipeline"},
+    {"batch"},
+    {"cell"},
     {"cli"},
 ]
 
