@@ -488,13 +488,16 @@ def default_workers() -> int:
 
 @contextmanager
 def dask_client(
-    scheduler: str | None = None, workers: int | None = None, *, timeout_s: float = CONNECT_TIMEOUT_S
+    scheduler: str | None = None, workers: int | None = None, *, timeout_s: float | None = None
 ) -> Iterator[Client]:
     """A Dask client: of the remote scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or of a
     :class:`~distributed.LocalCluster` of ``workers`` single-threaded processes (default: one per
     core) on 127.0.0.1 with no dashboard. The client and the local cluster are closed on exit, whatever
-    happens. An unreachable scheduler is a :class:`SchedulerError` after ``timeout_s`` seconds."""
+    happens. An unreachable scheduler is a :class:`SchedulerError` after ``timeout_s`` seconds
+    (default :data:`CONNECT_TIMEOUT_S`)."""
     from distributed import Client, LocalCluster
+
+    timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
 
     cluster = None
     client = None
@@ -509,6 +512,9 @@ def dask_client(
                 processes=True,
                 host="127.0.0.1",
                 dashboard_address=None,
+                # the scheduler's plain HTTP endpoint (health, metrics; no dashboard) on a free loopback
+                # port, not on 8787, which another cluster or a dashboard may hold
+                scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                 silence_logs=logging.ERROR,
             )
             client = Client(cluster)
@@ -592,17 +598,19 @@ def run_batch(
     start = time.perf_counter()
     records: list[RowRecord | None] = [done_record(out, row) for row in spec.rows]
     todo = [i for i, r in enumerate(records) if r is None]
-    with progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance:
+    tasks = [(solve_row, (spec.rows[i].problem, spec.preview)) for i in todo]
+    with (
+        engine(serial=serial or not todo, scheduler=scheduler, workers=workers) as client,
+        progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance,
+    ):
 
         def on_done(k: int, outcome: Any) -> None:
             i = todo[k]
             records[i] = store_row(out, spec.rows[i], outcome)
             advance(spec.rows[i].id if outcome["status"] != "ok" else None)
 
-        tasks = [(solve_row, (spec.rows[i].problem, spec.preview)) for i in todo]
-        with engine(serial=serial or not todo, scheduler=scheduler, workers=workers) as client:
-            used = 0 if client is None else len(client.scheduler_info(n_workers=-1)["workers"])
-            run_tasks(client, tasks, on_done)
+        used = 0 if client is None else len(client.scheduler_info(n_workers=-1)["workers"])
+        run_tasks(client, tasks, on_done)
     final = tuple(r for r in records if r is not None)
     csv_path, md_path = write_table(out, final, spec.keys)
     return BatchResult(out, final, csv_path, md_path, used, time.perf_counter() - start, spec.keys)

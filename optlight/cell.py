@@ -7,7 +7,7 @@ A *cell spec* (TOML) names a base problem, the lights to reach and the ranges to
     lights = "landmarks"         # the base problem's landmarks, or [[zenith_deg, azimuth_deg], ...]
     method = "coarse_to_fine"    # or "grid"
     steps = 5                    # values per searched axis (per level)
-    levels = 3                   # coarse_to_fine: each level zooms to ±1 step around the best so far
+    levels = 3                   # coarse_to_fine: each level halves the window, around the best so far
     top = 3                      # best placements solved in full for their acquisition time
     preview = false              # preview.html in best_plan/
 
@@ -31,8 +31,9 @@ clear where this one is not. A placement whose problem is invalid (the camera in
 not seeing the object) scores 0 with its error.
 
 **Search.** ``grid``: every combination of ``steps`` values per searched axis. ``coarse_to_fine``:
-that grid, then ``levels − 1`` times a grid of ``steps`` values per axis over ±1 step of the previous
-level around the best placement so far (new points only). Each placement is one task on the batch
+that grid, then at each level L = 1 … ``levels − 1`` a grid of ``steps`` values per axis over a
+window half as wide as the previous level's (2^−L of the range), centred on the best placement so far
+and shifted to stay inside the range (new points only). Each placement is one task on the batch
 engine (:mod:`optlight.batch`: a local Dask cluster, or a remote scheduler).
 
 **Then the acquisition time.** The placements with the best score (at most ``top``, the most lights
@@ -245,9 +246,10 @@ def landmark_lights(problem: Problem) -> Array:
 
 def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
     """The score of one placement (module docstring): how many of ``lights`` (N, 2: zenith, azimuth
-    in rad) the robot ``reached`` and how many of those with the view and the beam ``clear``, the
-    bodies that blocked the view or the beam most (``blocked_by``), ``error`` when the problem cannot
-    be built, and the evaluation's ``time_s``."""
+    in rad) the robot ``reached`` and how many of those with the view and the beam ``clear``, for each
+    body that is the first obstacle of some view or beam ray the number of lights where it is
+    (``blocked_by``, most first), ``error`` when the problem cannot be built, and the evaluation's
+    ``time_s``."""
     start = time.perf_counter()
     out: dict[str, Any] = {"lights": len(lights), "reached": 0, "clear": 0, "blocked_by": {}, "error": None}
     try:
@@ -273,7 +275,7 @@ def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
             np.array(thetas), np.zeros(len(thetas))
         )
         out["clear"] = sum(c.view_blocked == 0.0 and c.beam_blocked == 0.0 for c in view.captures)
-        blockers = Counter(b for c in view.captures for b in (c.view_body, c.beam_body) if b is not None)
+        blockers = Counter(b for c in view.captures for b in {*c.view_bodies, *c.beam_bodies})
         out["blocked_by"] = dict(blockers.most_common())
     out["time_s"] = time.perf_counter() - start
     return out
@@ -370,16 +372,16 @@ def axis_values(lo: float, hi: float, steps: int) -> Array:
 
 
 def level_grid(spec: CellSpec, level: int, center: Mapping[str, float] | None) -> list[dict[str, float]]:
-    """The placements of one level: the whole ranges at level 0, else ±1 step of the previous level
-    (step h_L = (hi − lo)/(steps − 1) · (2/(steps − 1))^(L−1)) around ``center``, clipped to the ranges."""
+    """The placements of one level: the whole ranges at level 0; at level L the window of half-width
+    w_L = (hi − lo)/2^(L+1) per axis around ``center``, shifted to stay inside [lo, hi]."""
     per_axis = []
     for axis, (lo, hi) in spec.ranges.items():
         if level == 0 or center is None or lo == hi:
             per_axis.append(axis_values(lo, hi, spec.steps))
             continue
-        h = (hi - lo) / (spec.steps - 1) * (2.0 / (spec.steps - 1)) ** (level - 1)
-        c = center[axis]
-        per_axis.append(axis_values(max(lo, c - h), min(hi, c + h), spec.steps))
+        w = (hi - lo) / 2.0 ** (level + 1)
+        c = min(max(center[axis], lo + w), hi - w)
+        per_axis.append(axis_values(c - w, c + w, spec.steps))
     axes = list(spec.ranges)
     mesh = np.meshgrid(*per_axis, indexing="ij")
     return [
