@@ -20,9 +20,10 @@ problem file, and a mistake is a :class:`~optlight.errors.ProblemError` naming t
 key (``grid.robot.name[1]``, ``rows[2].landmarks.count``).
 
 Each row is one task, ``optlight.solve(problem)`` then ``plan.save(folder)`` on a worker
-(:func:`solve_row`); the worker returns the folder's files and the client writes them under
-``OUT/plans/<row>/``, so workers need no shared file system (they do need the problem's own files — a
-mesh, a URDF, a reference image — at the same paths). A row that raises (an unreachable landmark, a
+(:func:`solve_row`), into ``OUT/plans/<row>/``: the workers of a local cluster write there
+themselves; those of a remote cluster return the folder's files and the client writes them, so they
+need no shared file system (``shared_out`` when they do share ``OUT``; they do need the problem's
+own files — a mesh, a URDF, a reference image — at the same paths). A row that raises (an unreachable landmark, a
 plan that fails verification, anything) is recorded as failed with its error and the batch goes on.
 Warnings of the solve (UserWarning: dropped or moved landmarks) are kept per row. After each row,
 ``OUT/records/<row>.json`` records it; a run in the same ``OUT`` skips the rows already done (their
@@ -277,29 +278,37 @@ def _value_text(value: Any) -> str:
 # --------------------------------------------------------------------------------------------
 
 
-def solve_row(problem: Problem, preview: bool = False) -> dict[str, Any]:
-    """The worker's task: ``optlight.solve(problem)``, then ``plan.save`` into a temporary folder.
+def solve_row(problem: Problem, preview: bool = False, folder: str | None = None) -> dict[str, Any]:
+    """The worker's task: ``optlight.solve(problem)``, then ``plan.save``.
 
-    Returns plain data: ``status`` ("ok", or "failed" with ``error``), the plan's numbers under
-    ``metrics`` (also for a plan that failed verification), the UserWarnings raised (``warnings``),
-    the solve's ``solve_s``, and ``files`` (relative path -> bytes) of the saved folder when it
-    verified. Never raises for a row's own failure: the batch records it and goes on."""
+    With ``folder`` (a path the worker can write: the batch's own folder on this machine or on a
+    shared file system) the plan is saved there (through a hidden sibling renamed into place) and
+    ``saved`` is True; without it, into a temporary folder whose ``files`` (relative path -> bytes)
+    are returned for the client to write. Also returned, as plain data: ``status`` ("ok", or
+    "failed" with ``error``), the plan's numbers under ``metrics`` (also for a plan that failed
+    verification), the UserWarnings raised (``warnings``) and the row's time ``solve_s``. Never
+    raises for a row's own failure: the batch records it and goes on."""
     start = time.perf_counter()
-    out: dict[str, Any] = {"status": "failed", "error": None, "metrics": {}, "files": {}}
+    out: dict[str, Any] = {"status": "failed", "error": None, "metrics": {}, "files": {}, "saved": False}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             plan = solve(problem)
             summary = plan.summary()
             out["metrics"] = {key: summary[name] for key, name in METRICS.items()}
-            with tempfile.TemporaryDirectory(prefix="optlight-row-") as tmp:
-                folder = Path(tmp) / "plan"
-                plan.save(folder, preview=preview)
-                out["files"] = {
-                    p.relative_to(folder).as_posix(): p.read_bytes()
-                    for p in sorted(folder.rglob("*"))
-                    if p.is_file()
-                }
+            if folder is not None:
+                target = Path(folder)
+                write_folder(target, lambda partial: plan.save(partial, preview=preview))
+                out["saved"] = True
+            else:
+                with tempfile.TemporaryDirectory(prefix="optlight-row-") as tmp:
+                    saved = Path(tmp) / "plan"
+                    plan.save(saved, preview=preview)
+                    out["files"] = {
+                        p.relative_to(saved).as_posix(): p.read_bytes()
+                        for p in sorted(saved.rglob("*"))
+                        if p.is_file()
+                    }
             out["status"] = "ok"
         except Exception as e:  # a row's failure of any kind is its record, not the batch's end
             out["error"] = error_text(e)
@@ -308,6 +317,30 @@ def solve_row(problem: Problem, preview: bool = False) -> dict[str, Any]:
     )
     out["solve_s"] = time.perf_counter() - start
     return out
+
+
+def write_folder(target: Path, write: Callable[[Path], object]) -> Path:
+    """``write(partial)`` fills a hidden sibling of ``target``, which is then renamed to ``target``;
+    a ``target`` already there is this batch's own, left by a run that stopped before recording it,
+    and is replaced."""
+    partial = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.partial")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    write(partial)
+    if target.exists():
+        shutil.rmtree(target)
+    partial.rename(target)
+    return target
+
+
+def write_files(files: Mapping[str, bytes]) -> Callable[[Path], None]:
+    """A ``write`` for :func:`write_folder`: ``files`` (relative path -> bytes) into the folder."""
+
+    def write(folder: Path) -> None:
+        for name, content in files.items():
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_bytes(content)
+
+    return write
 
 
 def error_text(e: BaseException) -> str:
@@ -399,20 +432,15 @@ def done_record(out: Path, row: BatchRow) -> RowRecord | None:
 
 
 def store_row(out: Path, row: BatchRow, outcome: Mapping[str, Any]) -> RowRecord:
-    """Write a finished row: its files into ``plans/<id>/`` (through a hidden folder renamed into
-    place), then its record ``records/<id>.json`` (written whole, then renamed)."""
+    """Record a finished row: its files into ``plans/<id>/`` (:func:`write_folder`) unless the
+    worker saved them there itself, then its record ``records/<id>.json`` (written whole, then
+    renamed)."""
     folder: str | None = None
+    target = out / PLANS / row.id
     files: Mapping[str, bytes] = outcome.get("files") or {}
     if files:
-        target = out / PLANS / row.id
-        partial = out / PLANS / f".{row.id}.{uuid.uuid4().hex[:8]}.partial"
-        for name, content in files.items():
-            (partial / name).parent.mkdir(parents=True, exist_ok=True)
-            (partial / name).write_bytes(content)
-        if target.exists():
-            # a folder of this row left by a run that stopped before writing its record: ours, stale
-            shutil.rmtree(target)
-        partial.rename(target)
+        write_folder(target, write_files(files))
+    if files or outcome.get("saved"):
         folder = target.relative_to(out).as_posix()
     record = RowRecord(
         id=row.id,
@@ -585,12 +613,18 @@ def run_batch(
     workers: int | None = None,
     serial: bool = False,
     progress: bool = True,
+    client: Client | None = None,
+    shared_out: bool = False,
 ) -> BatchResult:
     """Solve every row of a batch spec (a :class:`BatchSpec` or a file) into ``out``.
 
     On a local cluster of ``workers`` processes (default: one per core), on the remote Dask
     ``scheduler`` when an address is given, or here, one row after the other, when ``serial``. Rows
     done by an earlier run into ``out`` are skipped. ``progress`` shows a progress bar on stderr.
+    ``client``: a Dask client of the caller's to run on instead (kept open; e.g. one cluster for
+    several batches in a notebook). Workers of a local cluster save the plans into ``out``
+    themselves; those of a remote scheduler (or a given client) send the files back to be written
+    here, unless ``shared_out`` says that ``out`` is the same path on a file system they share.
     Returns the records of every row (see :class:`BatchResult`); a failed row does not raise."""
     spec = spec if isinstance(spec, BatchSpec) else load_batch_spec(spec)
     out = Path(out)
@@ -598,9 +632,15 @@ def run_batch(
     start = time.perf_counter()
     records: list[RowRecord | None] = [done_record(out, row) for row in spec.rows]
     todo = [i for i, r in enumerate(records) if r is None]
-    tasks = [(solve_row, (spec.rows[i].problem, spec.preview)) for i in todo]
+    # workers on this machine save into out themselves; remote ones send the files unless out is shared
+    direct = serial or shared_out or (scheduler is None and client is None)
+    plans = out.resolve() / PLANS
+    tasks = [
+        (solve_row, (spec.rows[i].problem, spec.preview, str(plans / spec.rows[i].id) if direct else None))
+        for i in todo
+    ]
     with (
-        engine(serial=serial or not todo, scheduler=scheduler, workers=workers) as client,
+        engine(serial=serial or not todo, scheduler=scheduler, workers=workers, client=client) as client,
         progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance,
     ):
 
@@ -617,10 +657,16 @@ def run_batch(
 
 
 @contextmanager
-def engine(*, serial: bool, scheduler: str | None, workers: int | None) -> Iterator[Client | None]:
-    """The Dask client of :func:`dask_client`, or None (tasks run here, in order) when ``serial``."""
+def engine(
+    *, serial: bool, scheduler: str | None, workers: int | None, client: Client | None = None
+) -> Iterator[Client | None]:
+    """None (tasks run here, in order) when ``serial``; else ``client`` when given (the caller's,
+    left open), else the client of :func:`dask_client`, closed on exit."""
     if serial:
         yield None
+        return
+    if client is not None:
+        yield client
         return
     with dask_client(scheduler, workers) as client:
         yield client

@@ -53,15 +53,13 @@ import dataclasses
 import json
 import math
 import re
-import shutil
 import time
 import tomllib
-import uuid
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -76,6 +74,8 @@ from optlight.batch import (
     progress_bar,
     run_tasks,
     solve_row,
+    write_files,
+    write_folder,
 )
 from optlight.environment.view import view_check_for
 from optlight.errors import OptlightError, ProblemError
@@ -84,6 +84,9 @@ from optlight.planning.landmarks import find_landmarks
 from optlight.planning.policy import Reacher
 from optlight.setup import Setup
 from optlight.spec import Problem
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 Array = NDArray[np.float64]
 
@@ -411,16 +414,17 @@ def design_cell(
     workers: int | None = None,
     serial: bool = False,
     progress: bool = True,
+    client: Client | None = None,
 ) -> CellResult:
     """Search the placements of a cell spec (a :class:`CellSpec` or a file) and write the results into
     ``out`` (module docstring). The engine as :func:`optlight.batch.run_batch`: a local cluster of
-    ``workers`` processes, the remote ``scheduler``, or here when ``serial``."""
+    ``workers`` processes, the remote ``scheduler``, the caller's ``client``, or here when ``serial``."""
     spec = spec if isinstance(spec, CellSpec) else load_cell_spec(spec)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     candidates: list[Candidate] = []
-    with engine(serial=serial, scheduler=scheduler, workers=workers) as client:
+    with engine(serial=serial, scheduler=scheduler, workers=workers, client=client) as client:
         lights = spec.lights
         if lights is None:
             found: list[Array] = []
@@ -535,23 +539,10 @@ def write_cell(out: Path, result: CellResult) -> dict[str, Path]:
     files["problem"].write_text(problem_toml(result.best_problem))
     plan_files = (result.best.solve or {}).get("files") or {}
     if plan_files:
-        files["plan"] = _write_folder(out / "best_plan", plan_files)
+        files["plan"] = write_folder(out / "best_plan", write_files(plan_files))
     files["summary"] = out / "cell.json"
     files["summary"].write_text(json.dumps(json_safe(_summary(result)), indent=1) + "\n")
     return files
-
-
-def _write_folder(target: Path, files: Mapping[str, bytes]) -> Path:
-    """``files`` written into a hidden sibling folder, then renamed to ``target`` (replacing an
-    earlier run's)."""
-    partial = target.with_name(f".{target.name}.{uuid.uuid4().hex[:8]}.partial")
-    for name, content in files.items():
-        (partial / name).parent.mkdir(parents=True, exist_ok=True)
-        (partial / name).write_bytes(content)
-    if target.exists():
-        shutil.rmtree(target)  # this command's own output of an earlier run
-    partial.rename(target)
-    return target
 
 
 def _write_candidates(path: Path, result: CellResult) -> None:

@@ -222,9 +222,9 @@ def test_a_resumed_batch_solves_only_what_is_not_done(
     solved: list[tuple[float, ...]] = []
     real = batch.solve_row
 
-    def counted(problem: optlight.Problem, preview: bool = False) -> dict:
+    def counted(problem: optlight.Problem, preview: bool = False, folder: str | None = None) -> dict:
         solved.append(problem.robot.base_position_m)
-        return real(problem, preview)
+        return real(problem, preview, folder)
 
     monkeypatch.setattr(batch, "solve_row", counted)
     spec = load_batch_spec(out.parent / "batch.toml")
@@ -270,3 +270,27 @@ def test_the_local_cluster_listens_on_loopback_without_dashboard() -> None:
         with pytest.raises(urllib.error.HTTPError) as missing:
             urllib.request.urlopen(f"{http}/status", timeout=10)
         assert missing.value.code == 404
+
+
+def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Path) -> None:
+    """A scheduler given by address (a local cluster standing in for a remote one): its workers do
+    not write into the output folder; the plans' files come back and are written here, the same
+    files as a serial run's."""
+    spec = write_spec(tmp_path, PLACEMENTS[:1])
+    serial = run_batch(spec, tmp_path / "serial", serial=True, progress=False)
+    before = _children()
+    with dask_client(workers=1) as cluster:
+        remote = run_batch(spec, tmp_path / "remote", scheduler=cluster.scheduler.address, progress=False)
+        assert remote.workers == 1
+    assert set(_children()) <= set(before) | {
+        pid for pid, cmd in _children().items() if "multiprocessing.resource_tracker" in cmd
+    }
+    (ours,), (theirs,) = serial.records, remote.records
+    assert theirs.status == "ok" and theirs.folder == ours.folder
+    names = sorted(p.name for p in (serial.out / ours.folder).iterdir())
+    assert names == sorted(p.name for p in (remote.out / theirs.folder).iterdir())
+    assert "plan.json" in names
+    for name in ("trajectory.csv", "lights.lp", "captures.csv"):
+        assert (remote.out / theirs.folder / name).read_bytes() == (
+            serial.out / ours.folder / name
+        ).read_bytes()
