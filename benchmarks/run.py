@@ -462,6 +462,8 @@ def batch_rows(name: str, result: Result) -> list[Row]:
         Row(label, "one row on a worker [s]", result["row_on_worker_s"]["median"], result["row_on_worker_s"]["p98"]),
         Row(label, "Dask overhead per task [ms]", result["dask_overhead_per_task_ms"]),
         Row(f"{name} default problem", "one row, serial [s]", result["default_plan_s"]),
+        Row(name, "load average (1 min), before", result["load_average_1min"]["before"]),
+        Row(name, "load average (1 min), after", result["load_average_1min"]["after"]),
     ]
     cell = result["cell"]
     per_min = "placements per minute"

@@ -294,3 +294,8 @@ def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Pat
         assert (remote.out / theirs.folder / name).read_bytes() == (
             serial.out / ours.folder / name
         ).read_bytes()
+
+
+def test_the_example_spec_is_valid() -> None:
+    spec = load_batch_spec(Path(__file__).resolve().parents[1] / "examples" / "batch_placements.toml")
+    assert len(spec.rows) == 6 and spec.keys == ("robot.base_position_m", "landmarks.count")

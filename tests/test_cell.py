@@ -222,3 +222,8 @@ def test_the_cluster_search_gives_the_serial_one(tmp_path: Path) -> None:
     assert summary["best"]["values"] == serial.best.values
     assert summary["best"]["duration_s"] == pytest.approx(serial.best.duration_s, rel=1e-9)
     assert (tmp_path / "cluster" / "best_problem.toml").read_text() == serial.files["problem"].read_text()
+
+
+def test_the_example_spec_is_valid() -> None:
+    spec = load_cell_spec(Path(__file__).resolve().parents[1] / "examples" / "cell_panda.toml")
+    assert spec.searched == ("base_x_m", "base_y_m") and spec.lights is None and spec.levels == 2
