@@ -574,9 +574,11 @@ def run_tasks(
     client: Client | None,
     tasks: Sequence[tuple[Callable[..., Any], tuple[Any, ...]]],
     on_done: Callable[[int, Any], None],
+    lost: Mapping[str, Any] | None = None,
 ) -> None:
     """Run ``fn(*args)`` for each task, on ``client``'s workers or here in order when None, calling
-    ``on_done(index, result)`` as each finishes. A task whose worker died gives a failed outcome."""
+    ``on_done(index, result)`` as each finishes. On a cluster, a task that raised or whose worker
+    died gives ``{**lost, "error": ...}`` when ``lost`` is given, else its exception is raised."""
     if client is None:
         for i, (fn, args) in enumerate(tasks):
             on_done(i, fn(*args))
@@ -589,13 +591,10 @@ def run_tasks(
         i = index[future.key]
         try:
             result = future.result()
-        except Exception as e:  # the worker process died or the task could not be sent
-            result = {
-                "status": "failed",
-                "error": f"task lost: {error_text(e)}",
-                "metrics": {},
-                "warnings": [],
-            }
+        except Exception as e:  # the task raised, its worker died, or it could not be sent
+            if lost is None:
+                raise
+            result = {**lost, "error": f"task lost: {error_text(e)}"}
         on_done(i, result)
         future.release()
 
@@ -650,7 +649,7 @@ def run_batch(
             advance(spec.rows[i].id if outcome["status"] != "ok" else None)
 
         used = 0 if client is None else len(client.scheduler_info(n_workers=-1)["workers"])
-        run_tasks(client, tasks, on_done)
+        run_tasks(client, tasks, on_done, lost={"status": "failed", "metrics": {}, "warnings": []})
     final = tuple(r for r in records if r is not None)
     csv_path, md_path = write_table(out, final, spec.keys)
     return BatchResult(out, final, csv_path, md_path, used, time.perf_counter() - start, spec.keys)

@@ -78,7 +78,7 @@ from optlight.batch import (
     write_folder,
 )
 from optlight.environment.view import view_check_for
-from optlight.errors import OptlightError, ProblemError
+from optlight.errors import ProblemError
 from optlight.jsondata import json_safe
 from optlight.planning.landmarks import find_landmarks
 from optlight.planning.policy import Reacher
@@ -251,37 +251,40 @@ def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
     """The score of one placement (module docstring): how many of ``lights`` (N, 2: zenith, azimuth
     in rad) the robot ``reached`` and how many of those with the view and the beam ``clear``, for each
     body that is the first obstacle of some view or beam ray the number of lights where it is
-    (``blocked_by``, most first), ``error`` when the problem cannot be built, and the evaluation's
-    ``time_s``."""
+    (``blocked_by``, most first), ``error`` when the problem cannot be built or the evaluation
+    failed (then all counts are 0), and the evaluation's ``time_s``."""
     start = time.perf_counter()
-    out: dict[str, Any] = {"lights": len(lights), "reached": 0, "clear": 0, "blocked_by": {}, "error": None}
+    out: dict[str, Any] = {**unscored(len(lights)), "error": None}
     try:
         setup = Setup.from_problem(problem)
-    except OptlightError as e:
-        out["error"] = error_text(e)
-        out["time_s"] = time.perf_counter() - start
-        return out
-    reacher, robot = Reacher(setup), setup.robot
-    thetas = []
-    previous = robot.theta_ref
-    for zenith, azimuth in lights[np.argsort(lights[:, 1], kind="stable")]:
-        position = setup.sphere.position(zenith, azimuth)
-        attempt = reacher.attempt(position, previous)
-        if attempt.theta is None and previous is not robot.theta_ref:
-            attempt = reacher.attempt(position, robot.theta_ref)
-        if attempt.theta is not None:
-            thetas.append(attempt.theta)
-            previous = attempt.theta
-    out["reached"] = len(thetas)
-    if thetas:
-        view = view_check_for(robot, setup.scene, problem.light).check(
-            np.array(thetas), np.zeros(len(thetas))
-        )
-        out["clear"] = sum(c.view_blocked == 0.0 and c.beam_blocked == 0.0 for c in view.captures)
-        blockers = Counter(b for c in view.captures for b in {*c.view_bodies, *c.beam_bodies})
-        out["blocked_by"] = dict(blockers.most_common())
+        reacher, robot = Reacher(setup), setup.robot
+        thetas = []
+        previous = robot.theta_ref
+        for zenith, azimuth in lights[np.argsort(lights[:, 1], kind="stable")]:
+            position = setup.sphere.position(zenith, azimuth)
+            attempt = reacher.attempt(position, previous)
+            if attempt.theta is None and previous is not robot.theta_ref:
+                attempt = reacher.attempt(position, robot.theta_ref)
+            if attempt.theta is not None:
+                thetas.append(attempt.theta)
+                previous = attempt.theta
+        out["reached"] = len(thetas)
+        if thetas:
+            view = view_check_for(robot, setup.scene, problem.light).check(
+                np.array(thetas), np.zeros(len(thetas))
+            )
+            out["clear"] = sum(c.view_blocked == 0.0 and c.beam_blocked == 0.0 for c in view.captures)
+            blockers = Counter(b for c in view.captures for b in {*c.view_bodies, *c.beam_bodies})
+            out["blocked_by"] = dict(blockers.most_common())
+    except Exception as e:  # a placement's failure is its score (0), not the search's end
+        out.update(unscored(len(lights)), error=error_text(e))
     out["time_s"] = time.perf_counter() - start
     return out
+
+
+def unscored(lights: int) -> dict[str, Any]:
+    """The counts of a placement that could not be scored."""
+    return {"lights": lights, "reached": 0, "clear": 0, "blocked_by": {}}
 
 
 # --------------------------------------------------------------------------------------------
@@ -477,7 +480,7 @@ def _score(
     tasks = [(evaluate_placement, (p, lights)) for p in problems if isinstance(p, Problem)]
     built = [i for i, p in enumerate(problems) if isinstance(p, Problem)]
     outcomes: dict[int, Mapping[str, Any]] = {
-        i: {"lights": len(lights), "reached": 0, "clear": 0, "blocked_by": {}, "error": p, "time_s": 0.0}
+        i: {**unscored(len(lights)), "error": p, "time_s": 0.0}
         for i, p in enumerate(problems)
         if isinstance(p, str)
     }
@@ -487,7 +490,7 @@ def _score(
             outcomes[built[k]] = outcome
             advance(None)
 
-        run_tasks(client, tasks, on_done)
+        run_tasks(client, tasks, on_done, lost={**unscored(len(lights)), "time_s": math.nan})
     for i, values in enumerate(grid):
         o = outcomes[i]
         candidates.append(
@@ -520,7 +523,7 @@ def _solve_best(client: Any, spec: CellSpec, candidates: list[Candidate], progre
             solved[chosen[k].index] = dataclasses.replace(chosen[k], solve=outcome)
             advance(None if outcome["status"] == "ok" else f"placement {chosen[k].index}: {outcome['error']}")
 
-        run_tasks(client, tasks, on_done)
+        run_tasks(client, tasks, on_done, lost={"status": "failed", "metrics": {}, "warnings": []})
     return solved
 
 

@@ -227,3 +227,17 @@ def test_the_cluster_search_gives_the_serial_one(tmp_path: Path) -> None:
 def test_the_example_spec_is_valid() -> None:
     spec = load_cell_spec(Path(__file__).resolve().parents[1] / "examples" / "cell_panda.toml")
     assert spec.searched == ("base_x_m", "base_y_m") and spec.lights is None and spec.levels == 2
+
+
+def test_a_placement_whose_evaluation_fails_scores_zero_with_the_error(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from optlight.planning import policy
+
+    def broken(*args: object, **kwargs: object) -> None:
+        raise RuntimeError("IK exploded")
+
+    monkeypatch.setattr(policy.Reacher, "attempt", broken)
+    outcome = evaluate_placement(reduced_problem(camera_px=48), np.deg2rad(np.array(LIGHTS)))
+    assert (outcome["reached"], outcome["clear"]) == (0, 0)
+    assert outcome["error"] == "RuntimeError: IK exploded"
