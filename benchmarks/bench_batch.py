@@ -14,9 +14,9 @@ and cold) and over the serial run, the time of one row on a worker, Dask's own p
 here (the wall time of 400 empty tasks on a warm 2-worker cluster, per task), and the 1-minute load
 average before and after (the machine is shared: other processes take cores from the workers).
 
-Cell: :func:`optlight.design_cell` on a 4 × 4 grid of base placements (x, y ∈ [−0.15, 0.15] m)
-scored against 6 lights, serially (baseline) and on 2 warm workers: placements scored per minute of
-the scoring's wall time (the final full solve excluded).
+Cell: :func:`optlight.design_cell` on a 6 × 6 grid of base placements (x, y ∈ [−0.15, 0.15] m)
+scored against 6 lights, serially (baseline) and on 2 workers warmed by scoring one placement each:
+placements scored per minute of the scoring's wall time (the final full solve excluded).
 
 Per-plan cost at full size: one row of the default problem itself (256² camera, 36 landmarks,
 no preview) solved and saved serially, for the README's projection to a cluster.
@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from optlight.batch import dask_client, run_batch, solve_row
-from optlight.cell import design_cell, problem_toml
+from optlight.cell import design_cell, evaluate_placement, load_cell_spec, problem_toml
 from optlight.spec import load_problem, problem_from_dict
 
 if TYPE_CHECKING:
@@ -55,7 +55,7 @@ def _dist(values: list[float]) -> dict[str, float]:
 
 
 def _write_inputs(folder: Path, plans: int) -> tuple[Path, Path]:
-    """The small base problem, a batch spec of ``plans`` base placements and a 4 × 4 cell spec."""
+    """The small base problem, a batch spec of ``plans`` base placements and a 6 × 6 cell spec."""
     data = load_problem("default").to_dict()
     data["camera"].update(width=48, height=48)
     data["landmarks"]["count"] = 3
@@ -67,7 +67,7 @@ def _write_inputs(folder: Path, plans: int) -> tuple[Path, Path]:
     lights = [[40.0, 60.0 * k] for k in range(6)]
     cell = folder / "cell.toml"
     cell.write_text(
-        f'problem = "small.toml"\nlights = {json.dumps(lights)}\nsteps = 4\ntop = 1\n'
+        f'problem = "small.toml"\nlights = {json.dumps(lights)}\nsteps = 6\ntop = 1\n'
         "[search]\nbase_x_m = [-0.15, 0.15]\nbase_y_m = [-0.15, 0.15]\n"
     )
     return batch, cell
@@ -129,6 +129,9 @@ def run(plans: int = 8, repeats: int = 1) -> dict[str, Any]:
             else:
                 with dask_client(workers=2) as client:
                     _warm(client)
+                    spec = load_cell_spec(cell)
+                    lights = np.asarray(spec.lights)
+                    client.run(evaluate_placement, spec.base, lights)  # each worker's first placement
                     found = design_cell(cell, folder / "cell-2", client=client, progress=False)
             cells[label] = {
                 "placements": len(found.candidates),
