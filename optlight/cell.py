@@ -27,7 +27,9 @@ posture. At the joint angles found, the exact view and beam check
 light to the object against the robot's collision meshes and the light housing) says whether the
 capture would be clear. The score is the fraction of the lights reached with the view and the beam
 clear. It is what the IK's posture gives, so a lower bound: another posture of a redundant arm may be
-clear where this one is not. A placement whose problem is invalid (the camera inside the light sphere,
+clear where this one is not. Ties are broken by the lights where no robot link blocks a ray (the
+light's own housing may: a light near the camera axis is in the view whatever the placement), then by
+the lights reached. A placement whose problem is invalid (the camera inside the light sphere,
 not seeing the object) scores 0 with its error.
 
 **Search.** ``grid``: every combination of ``steps`` values per searched axis. ``coarse_to_fine``:
@@ -77,7 +79,7 @@ from optlight.batch import (
     write_files,
     write_folder,
 )
-from optlight.environment.view import view_check_for
+from optlight.environment.view import HOUSING, view_check_for
 from optlight.errors import ProblemError
 from optlight.jsondata import json_safe
 from optlight.planning.landmarks import find_landmarks
@@ -249,8 +251,10 @@ def landmark_lights(problem: Problem) -> Array:
 
 def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
     """The score of one placement (module docstring): how many of ``lights`` (N, 2: zenith, azimuth
-    in rad) the robot ``reached`` and how many of those with the view and the beam ``clear``, for each
-    body that is the first obstacle of some view or beam ray the number of lights where it is
+    in rad) the robot ``reached``, how many of those with the view and the beam ``clear``, how many
+    where no robot link blocks a ray (``robot_clear``: only the light's own housing may, which no
+    placement changes) and where the housing blocks the view (``housing_blocked``), for each body
+    that is the first obstacle of some view or beam ray the number of lights where it is
     (``blocked_by``, most first), ``error`` when the problem cannot be built or the evaluation
     failed (then all counts are 0), and the evaluation's ``time_s``."""
     start = time.perf_counter()
@@ -274,6 +278,10 @@ def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
                 np.array(thetas), np.zeros(len(thetas))
             )
             out["clear"] = sum(c.view_blocked == 0.0 and c.beam_blocked == 0.0 for c in view.captures)
+            out["robot_clear"] = sum(
+                not ({*c.view_bodies, *c.beam_bodies} - {HOUSING}) for c in view.captures
+            )
+            out["housing_blocked"] = sum(HOUSING in c.view_bodies for c in view.captures)
             blockers = Counter(b for c in view.captures for b in {*c.view_bodies, *c.beam_bodies})
             out["blocked_by"] = dict(blockers.most_common())
     except Exception as e:  # a placement's failure is its score (0), not the search's end
@@ -284,7 +292,14 @@ def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
 
 def unscored(lights: int) -> dict[str, Any]:
     """The counts of a placement that could not be scored."""
-    return {"lights": lights, "reached": 0, "clear": 0, "blocked_by": {}}
+    return {
+        "lights": lights,
+        "reached": 0,
+        "clear": 0,
+        "robot_clear": 0,
+        "housing_blocked": 0,
+        "blocked_by": {},
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -304,6 +319,8 @@ class Candidate:
     lights: int
     reached: int
     clear: int
+    robot_clear: int
+    housing_blocked: int
     blocked_by: Mapping[str, int]
     error: str | None
     time_s: float
@@ -325,9 +342,10 @@ class Candidate:
         """The full plan was solved, verified and saved."""
         return self.solve is not None and self.solve.get("status") == "ok"
 
-    def rank(self) -> tuple[float, int, int]:
-        """Sort key of the score: the fraction clear, then the lights reached (most first)."""
-        return (-self.fraction, -self.reached, self.index)
+    def rank(self) -> tuple[float, int, int, int]:
+        """Sort key of the score: the fraction clear, then the lights where no robot link blocks the
+        view or the beam, then the lights reached (most first)."""
+        return (-self.fraction, -self.robot_clear, -self.reached, self.index)
 
 
 @dataclass(frozen=True)
@@ -366,8 +384,16 @@ class CellResult:
                 lines.append(f"acquisition time {best.duration_s:.2f} s ({verdict})")
             else:
                 lines.append(f"full solve failed: {best.solve.get('error')}")
+        if best.housing_blocked:
+            lines.append(
+                f"the light's own housing blocks the camera's view at {best.housing_blocked} of the "
+                f"{best.lights} lights, whatever the placement: they are too near the camera axis"
+            )
         if best.clear == 0:
-            lines.append("no placement in the ranges reaches a light with the view clear: widen [search]")
+            lines.append(
+                "no placement in the ranges reaches a light with the view clear; the best is ranked by "
+                f"the lights where no robot link is in the way ({best.robot_clear})"
+            )
         lines += [f"wrote {path}" for path in self.files.values()]
         return lines
 
@@ -501,6 +527,8 @@ def _score(
                 o["lights"],
                 o["reached"],
                 o["clear"],
+                o["robot_clear"],
+                o["housing_blocked"],
                 o["blocked_by"],
                 o["error"],
                 o["time_s"],
@@ -509,12 +537,12 @@ def _score(
 
 
 def _solve_best(client: Any, spec: CellSpec, candidates: list[Candidate], progress: bool) -> list[Candidate]:
-    """Solve in full the placements with the best score (at most ``spec.top``, the most lights reached
-    first); returns the candidates with those outcomes attached."""
+    """Solve in full the placements with the best score and robot-clear count (at most ``spec.top``,
+    the most lights reached first); returns the candidates with those outcomes attached."""
     ranked = sorted(candidates, key=Candidate.rank)
-    if not ranked or ranked[0].clear == 0:
+    if not ranked or ranked[0].reached == 0:
         return candidates
-    chosen = [c for c in ranked if c.fraction == ranked[0].fraction][: spec.top]
+    chosen = [c for c in ranked if c.rank()[:2] == ranked[0].rank()[:2]][: spec.top]
     tasks = [(solve_row, (placement_problem(spec, c.values), spec.preview)) for c in chosen]
     solved = list(candidates)
     with progress_bar(progress, len(tasks), "full solves") as advance:
@@ -550,7 +578,8 @@ def write_cell(out: Path, result: CellResult) -> dict[str, Path]:
 
 def _write_candidates(path: Path, result: CellResult) -> None:
     axes = list(result.spec.ranges)
-    header = ["index", "level", *axes, "lights", "reached", "clear", "fraction", "duration_s", "verified"]
+    header = ["index", "level", *axes, "lights", "reached", "clear", "robot_clear", "housing_blocked"]
+    header += ["fraction", "duration_s", "verified"]
     header += ["time_s", "blocked_by", "error"]
     with path.open("w", newline="") as f:
         writer = csv.writer(f)
@@ -559,6 +588,7 @@ def _write_candidates(path: Path, result: CellResult) -> None:
             solved = c.solve is not None
             writer.writerow(
                 [c.index, c.level, *(f"{c.values[a]:.9g}" for a in axes), c.lights, c.reached, c.clear]
+                + [c.robot_clear, c.housing_blocked]
                 + [f"{c.fraction:.6g}", f"{c.duration_s:.6g}" if math.isfinite(c.duration_s) else ""]
                 + [str(c.verified).lower() if solved else "", f"{c.time_s:.4g}"]
                 + [
@@ -585,6 +615,8 @@ def _summary(result: CellResult) -> dict[str, Any]:
             "fraction": best.fraction,
             "reached": best.reached,
             "clear": best.clear,
+            "robot_clear": best.robot_clear,
+            "housing_blocked": best.housing_blocked,
             "duration_s": best.duration_s if math.isfinite(best.duration_s) else None,
             "verified": best.verified,
             "error": (best.solve or {}).get("error"),
@@ -600,19 +632,31 @@ def _summary(result: CellResult) -> dict[str, Any]:
 def heatmap_figure(result: CellResult) -> Figure:
     """The score over the first two searched axes (the best over any other axis): the first level as
     a colour map, finer levels as dots, the best placement as a star, the base problem's as a cross;
-    with one searched axis, the score along it."""
+    with one searched axis, the score along it. Where no placement has a clear light, the secondary
+    score (lights with no robot link in the way) is shown instead."""
     spec = result.spec
     searched = spec.searched
     fig = Figure(figsize=(6.4, 5.2), layout="constrained")
     ax = fig.add_subplot()
-    label = f"fraction of the {len(result.lights)} lights reached with the view clear"
     best = result.best
     cands = result.candidates
+    n = len(result.lights)
+
+    def score(c: Candidate) -> float:
+        return c.fraction
+
+    label = f"fraction of the {n} lights reached with the view clear"
+    if not any(c.clear for c in cands):  # all zero: show the secondary score that ranked them
+
+        def score(c: Candidate) -> float:
+            return c.robot_clear / c.lights if c.lights else 0.0
+
+        label = f"fraction of the {n} lights with no robot link in the view\n(none is fully clear)"
     if len(searched) == 1:
         (axis,) = searched
         order = sorted(cands, key=lambda c: c.values[axis])
-        ax.plot([c.values[axis] for c in order], [c.fraction for c in order], "o-", ms=4)
-        ax.plot(best.values[axis], best.fraction, "*", color="tab:red", ms=14, label="best")
+        ax.plot([c.values[axis] for c in order], [score(c) for c in order], "o-", ms=4)
+        ax.plot(best.values[axis], score(best), "*", color="tab:red", ms=14, label="best")
         ax.axvline(spec.base_value(axis), color="grey", ls="--", label="base problem")
         ax.set_xlabel(axis)
         ax.set_ylabel(label)
@@ -626,7 +670,7 @@ def heatmap_figure(result: CellResult) -> Figure:
         for c in cands:
             if c.level == 0:
                 i, j = np.searchsorted(ys, c.values[ya]), np.searchsorted(xs, c.values[xa])
-                grid[i, j] = np.nanmax([grid[i, j], c.fraction])
+                grid[i, j] = np.nanmax([grid[i, j], score(c)])
         mesh = ax.pcolormesh(_edges(xs), _edges(ys), grid, cmap="viridis", vmin=0.0, vmax=1.0, shading="flat")
         fig.colorbar(mesh, ax=ax, label=label)
         finer = [c for c in cands if c.level > 0]
@@ -634,7 +678,7 @@ def heatmap_figure(result: CellResult) -> Figure:
             ax.scatter(
                 [c.values[xa] for c in finer],
                 [c.values[ya] for c in finer],
-                c=[c.fraction for c in finer],
+                c=[score(c) for c in finer],
                 cmap="viridis",
                 vmin=0.0,
                 vmax=1.0,

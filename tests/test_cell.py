@@ -170,6 +170,7 @@ def test_design_cell_picks_the_reachable_placement_and_writes_a_ready_problem(tm
     result = design_cell(spec, tmp_path / "out", serial=True, progress=False)
     xs = [c.values["base_x_m"] for c in result.candidates]
     assert xs == pytest.approx(np.linspace(-2.0, 0.0, 5))
+    assert all(c.clear <= c.robot_clear <= c.reached <= c.lights for c in result.candidates)
     far = [c for c in result.candidates if c.values["base_x_m"] <= -1.5]
     assert far and all(c.reached == 0 and c.fraction == 0.0 for c in far)
     best = result.best
