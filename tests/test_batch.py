@@ -187,6 +187,8 @@ def test_no_process_is_left_behind(cluster_run: dict) -> None:
 
 
 def test_the_cluster_gives_the_serial_results(cluster_run: dict, serial_run: optlight.BatchResult) -> None:
+    """The same records, trajectories and landmarks; to 1e-8 rather than bit for bit, since a Dask
+    worker runs its BLAS single-threaded (another summation order) where this process may not."""
     cluster = _records(cluster_run["out"])
     assert serial_run.workers == 0 and len(serial_run.records) == len(cluster)
     for record in serial_run.records:
@@ -197,14 +199,14 @@ def test_the_cluster_gives_the_serial_results(cluster_run: dict, serial_run: opt
             other["warnings"],
         )
         for key, value in record.metrics.items():
-            assert other["metrics"][key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
+            assert other["metrics"][key] == pytest.approx(value, rel=1e-8, abs=1e-10), key
         if record.folder is None:
             continue
         ours = np.loadtxt(serial_run.out / record.folder / "trajectory.csv", delimiter=",", skiprows=1)
         theirs = np.loadtxt(
             cluster_run["out"] / other["folder"] / "trajectory.csv", delimiter=",", skiprows=1
         )
-        np.testing.assert_allclose(ours, theirs, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(ours, theirs, rtol=1e-8, atol=1e-10)
         lights = [
             json.loads((out / f / "plan.json").read_text())["landmarks"]
             for out, f in ((serial_run.out, record.folder), (cluster_run["out"], other["folder"]))
