@@ -35,6 +35,8 @@ from optlight.spec import available_problems, load_problem, resolve_problem_path
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
+#: Most worker processes of a local cluster (``batch``, ``cell``).
+MAX_WORKERS = 1024
 #: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
 #: import can break a library for the rest of the run (trimesh catches it while importing an optional
 #: part and leaves an error wrapper where a class should be).
@@ -43,6 +45,8 @@ MODULES = {
     "render": ("optlight.scene", "optlight.export", "optlight.viz.images"),
     "reach": ("optlight.preflight", "optlight.export", "optlight.planning.reach"),
     "acquire": ("optlight.preflight", "optlight.export", "optlight.acquisition", "rich.console"),
+    "batch": ("optlight.batch", "rich.progress"),
+    "cell": ("optlight.cell", "optlight.export", "rich.progress"),
     "solve": (
         "optlight.preflight",
         "optlight.export",
@@ -214,6 +218,31 @@ def _cmd_reach(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from optlight.batch import check_batch_folder, run_batch
+
+    check_batch_folder(Path(args.out), option="--out")  # first: new, empty or an earlier batch's
+    result = run_batch(args.spec, args.out, scheduler=args.scheduler, workers=args.workers)
+    skipped = f", {result.skipped} done before" if result.skipped else ""
+    print(f"{result.ok} of {len(result.records)} rows solved ({result.failed} failed{skipped}) in {result.elapsed_s:.1f} s")
+    for record in result.records:
+        if record.status != "ok":
+            print(f"failed {record.id}: {record.error}", file=sys.stderr)
+    print(f"results: {result.table_md} and {result.table_csv}")
+    return 1 if result.failed else 0
+
+
+def _cmd_cell(args: argparse.Namespace) -> int:
+    from optlight.cell import design_cell
+    from optlight.export import check_output_folder
+
+    check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)  # before any work
+    result = design_cell(args.spec, args.out, scheduler=args.scheduler, workers=args.workers, overwrite=args.force)
+    for line in result.summary_lines():
+        print(line)
+    return 0
+
+
 def _cmd_problems(args: argparse.Namespace) -> int:
     problems = available_problems()
     width = max((len(n) for n in problems), default=0)
@@ -259,6 +288,22 @@ def number(lo: float, hi: float, unit: str, *, lo_open: bool = False) -> Callabl
         if not (math.isfinite(x) and (lo < x if lo_open else lo <= x) and x <= hi):
             raise argparse.ArgumentTypeError(f"expected a finite number of {unit} in {interval}, got {text}")
         return x
+
+    return parse
+
+
+def integer(lo: int, hi: int, unit: str) -> Callable[[str], int]:
+    """An argparse ``type``: an integer number of ``unit`` in [lo, hi], refused in one line that
+    echoes the text as given."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = lo - 1
+        if not lo <= n <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer number of {unit} in [{lo}, {hi}], got {text}")
+        return n
 
     return parse
 
@@ -326,12 +371,39 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", required=True, help="output PNG file (not an existing one unless --force)")
     p.add_argument("--force", action="store_true", help="replace an existing PNG file")
+    p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
+    p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output folder, new or empty, or an earlier batch's (resumed): plans/, records/, results.csv, results.md",
+    )
+    _add_engine_arguments(p)
+    p = add("cell", _cmd_cell, "search the robot's (and the camera's) placement for the most lights reached")
+    p.add_argument("spec", help="cell spec file (TOML): a base problem and the ranges to search")
+    p.add_argument(
+        "--out", required=True, help="output folder, new or empty: heat map, candidates, best_problem.toml, best_plan/"
+    )
+    p.add_argument("--force", action="store_true", help=force_help)
+    _add_engine_arguments(p)
     add("problems", _cmd_problems, "list the built-in problems")
     p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
     p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")
     p.add_argument("--quick", action="store_true", help="reduced sizes and one solve per problem (CI)")
     p.add_argument("--out", metavar="DIR", help="output folder (default benchmarks/results)")
     return parser
+
+
+def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="remote Dask scheduler (default: a local cluster on 127.0.0.1)"
+    )
+    p.add_argument(
+        "--workers",
+        type=integer(1, MAX_WORKERS, "worker processes"),
+        metavar="N",
+        help="local cluster worker processes (default: one per core)",
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:

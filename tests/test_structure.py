@@ -38,7 +38,8 @@ LAYERS: list[set[str]] = [
     {"report"},
     {"plan"},
     {"pipeline", "preflight"},
-    {"acquisition"},
+    {"acquisition", "batch"},
+    {"cell"},
     {"cli"},
 ]
 
