@@ -443,11 +443,12 @@ def _run(argv: Sequence[str] | None) -> int:
             for module in MODULES.get(args.command, ()):
                 importlib.import_module(module)
         return int(args.func(args))
-    except VerificationError as e:  # its report's lines follow the first
-        print(f"optlight: error: {e}", file=sys.stderr)
-        return 2
     except OptlightError as e:
-        print(f"optlight: error: {' '.join(str(e).split())}", file=sys.stderr)
+        if interrupts.pending():  # it came of a Ctrl-C IPOPT swallowed (a failed NLP): the interrupt wins
+            return _interrupted()
+        # a failed verification's report lines follow the first; any other error is one line
+        text = str(e) if isinstance(e, VerificationError) else " ".join(str(e).split())
+        print(f"optlight: error: {text}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return _interrupted()

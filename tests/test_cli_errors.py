@@ -718,6 +718,28 @@ def test_interrupts_latch_defer_and_stay_quiet() -> None:
     assert len(reported) == 1
 
 
+def test_an_error_that_a_swallowed_ctrl_c_caused_is_the_interrupt(
+    monkeypatch: pytest.MonkeyPatch, capfd
+) -> None:
+    """IPOPT swallows a Ctrl-C and returns "User_Requested_Stop"; the NLP then fails and the planner
+    raises its SolverError before the next progress callback: the command still exits 130."""
+    from optlight import cli
+    from optlight.errors import SolverError
+
+    def stopped(args: object) -> int:
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(1.0)  # the handler runs here
+        except KeyboardInterrupt:
+            pass  # swallowed, as CasADi's IPOPT interface does
+        raise SolverError("the trajectory NLP failed (User_Requested_Stop after 3 iterations)")
+
+    monkeypatch.setattr(cli, "_cmd_check", stopped)
+    capfd.readouterr()
+    assert main(["check", "default"]) == 130
+    assert capfd.readouterr().err == "optlight: interrupted\n"
+
+
 class Run:
     """``optlight solve`` as a subprocess, its stdout lines time-stamped as they arrive."""
 
