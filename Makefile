@@ -1,4 +1,6 @@
 # The newcomer's two commands: `make demo` and `make test`. Both create .venv when it is missing.
+# `make demo` passes --force: it may replace the results of its own earlier runs in $(OUT) (only the
+# files optlight wrote there; see optlight/export.py).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -10,11 +12,11 @@ OUT    ?= results/default
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,mitsuba]'
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/optlight solve default --out $(OUT)
+	$(BIN)/optlight solve default --out $(OUT) --force
 
 test: $(STAMP) lint
 	$(BIN)/python -m pytest -q

@@ -444,8 +444,55 @@ def environment_rows(name: str, result: Result) -> list[Row]:
     return rows
 
 
+def batch_rows(name: str, result: Result) -> list[Row]:
+    """``bench_batch``: the batch's wall time on 1 and 2 workers against the serial run (the baseline,
+    same run; success % = rows solved), the speed-ups, one row's time on a worker, Dask's per-task
+    overhead here, and the cell search's placements per minute on 2 workers against the serial search."""
+    label = f"{name} {result['plans']} plans"
+    walls = result["batch_wall_s"]
+    serial = walls["serial"]["median"]
+    rows = [
+        Row(
+            label,
+            f"wall time, {k} [s]",
+            v["median"],
+            v["p98"],
+            v["success_pct"],
+            None if k == "serial" else serial,
+        )
+        for k, v in walls.items()
+    ]
+    rows += [
+        Row(label, "speed-up, 2 over 1 workers (warm)", result["speedup_2_over_1_workers_warm"]),
+        Row(label, "speed-up, 2 over 1 workers (cold)", result["speedup_2_over_1_workers_cold"]),
+        Row(label, "speed-up, 2 warm workers over serial", result["speedup_2_workers_over_serial"]),
+        Row(
+            label,
+            "one row on a worker [s]",
+            result["row_on_worker_s"]["median"],
+            result["row_on_worker_s"]["p98"],
+        ),
+        Row(label, "Dask overhead per task [ms]", result["dask_overhead_per_task_ms"]),
+        Row(f"{name} default problem", "one row, serial [s]", result["default_plan_s"]),
+        Row(name, "load average (1 min), before", result["load_average_1min"]["before"]),
+        Row(name, "load average (1 min), after", result["load_average_1min"]["after"]),
+    ]
+    cell = result["cell"]
+    per_min = "placements per minute"
+    rows.append(
+        Row(
+            f"{name} cell",
+            f"{per_min}, 2 workers",
+            cell["2 workers"]["placements_per_min"],
+            baseline_median=cell["serial"]["placements_per_min"],
+        )
+    )
+    return rows
+
+
 #: Components whose results need their own reading (a baseline to pair); the rest are read generically.
 COMPONENT_ROWS: dict[str, RowsFn] = {
+    "batch": batch_rows,
     "environment": environment_rows,
     "ik": ik_rows,
     "landmarks": landmark_rows,

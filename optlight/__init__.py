@@ -28,6 +28,13 @@ from optlight.geometry import LightSphere
 from optlight.spec import Problem, available_problems, load_problem, problem_from_dict
 
 if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks they agree)
+    from optlight.acquisition import Acquisition, acquire
+    from optlight.batch import BatchResult, run_batch
+    from optlight.capture import ModelCamera
+    from optlight.capture.calibration import calibrate
+    from optlight.capture.folder import FolderCamera
+    from optlight.capture.mitsuba import MitsubaCamera
+    from optlight.cell import CellResult, design_cell
     from optlight.objectives import Objective
     from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
@@ -72,6 +79,16 @@ _LAZY = {
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
     "save_gray_png": "optlight.viz.images",
+    "acquire": "optlight.acquisition",
+    "Acquisition": "optlight.acquisition",
+    "ModelCamera": "optlight.capture",
+    "MitsubaCamera": "optlight.capture.mitsuba",
+    "FolderCamera": "optlight.capture.folder",
+    "calibrate": "optlight.capture.calibration",
+    "BatchResult": "optlight.batch",
+    "run_batch": "optlight.batch",
+    "CellResult": "optlight.cell",
+    "design_cell": "optlight.cell",
 }
 
 

@@ -1,43 +1,92 @@
 """The ``optlight`` command.
 
-Every subcommand takes PROBLEM as a path or the name of a file in ``problems/``. User mistakes
-(an invalid problem file, an unreachable landmark, a plan that fails verification) are printed in
-one line on stderr with exit status 2; no traceback.
+Every subcommand takes PROBLEM as a path or the name of a file in ``problems/``. Each checks what
+it will touch before any work: its arguments (finite, in range), its output location (the policy of
+:mod:`optlight.export`: never over files optlight did not write; an earlier output only with
+``--force``), then the problem file and everything built from it, built once
+(:func:`optlight.preflight.preflight` builds the :class:`~optlight.setup.Setup` that ``solve`` and
+``reach`` then use; ``render`` builds only the scene).
+User mistakes (an invalid argument, problem file or output location, an unreachable landmark, a plan
+that fails verification) are printed in one line on stderr with exit status 2, no traceback; progress
+and results go to stdout. Ctrl-C at any moment exits with status 130 and leaves no partial output.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import logging
+import math
+import os
+import signal
 import sys
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
-from optlight.errors import OptlightError
-from optlight.spec import available_problems, load_problem
+from optlight import interrupts
+from optlight.errors import OptlightError, UsageError, VerificationError
+from optlight.spec import available_problems, load_problem, resolve_problem_path
+
+#: What ``--force`` allows, as the output policy's errors say it.
+FORCE = "--force"
+#: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
+MIN_STEP_DEG = 0.1
+#: Most worker processes of a local cluster (``batch``, ``cell``).
+MAX_WORKERS = 1024
+#: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
+#: import can break a library for the rest of the run (trimesh catches it while importing an optional
+#: part and leaves an error wrapper where a class should be).
+MODULES = {
+    "check": ("optlight.preflight",),
+    "render": ("optlight.scene", "optlight.export", "optlight.viz.images"),
+    "reach": ("optlight.preflight", "optlight.export", "optlight.planning.reach"),
+    "acquire": ("optlight.preflight", "optlight.export", "optlight.acquisition", "rich.console"),
+    "batch": ("optlight.batch", "rich.progress"),
+    "cell": ("optlight.cell", "optlight.export", "rich.progress"),
+    "solve": (
+        "optlight.preflight",
+        "optlight.export",
+        "optlight.pipeline",
+        "optlight.report",
+        "optlight.viz.preview",
+        "rich.progress",
+        "rich.table",
+    ),
+}
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from optlight.setup import Setup
+    from optlight.preflight import preflight
 
-    # building the setup checks what the file alone cannot show (mesh, URDF and frame, reference
-    # image, the camera's view of the object, the environment's layout)
-    problem = Setup.from_problem(load_problem(args.problem)).problem
+    problem = load_problem(args.problem)
+    preflight(problem)  # builds the Setup: the check of what the file alone cannot show
     print(f"{problem.source}: valid ({problem.description})")
     return 0
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
+    from optlight.export import check_output_file, write_file
     from optlight.scene import Scene
     from optlight.viz.images import save_gray_png
 
+    if Path(args.out).suffix.lower() != ".png":
+        raise UsageError("--out", f"{args.out}: expected a .png file name")
+    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
-    scene = Scene.from_problem(problem)
+    scene = Scene.from_problem(problem)  # all a render needs (and the check of the object and camera)
     position = scene.sphere.position(np.deg2rad(args.zenith), np.deg2rad(args.azimuth))
     image = scene.render(position, noise=problem.light.noise_std > 0)
-    path = save_gray_png(args.out, image, problem.light.saturation)
+    path = write_file(
+        args.out,
+        lambda tmp: save_gray_png(tmp, image, problem.light.saturation),
+        overwrite=args.force,
+        option="--out",
+        force=FORCE,
+    )
     print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
     return 0
 
@@ -47,11 +96,16 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
+    from optlight.export import check_output_folder
     from optlight.pipeline import STAGES, solve
+    from optlight.preflight import preflight
 
-    console = Console(stderr=True)
+    out = Path(args.out) if args.out else Path("results") / resolve_problem_path(args.problem).stem
+    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
-    out = Path(args.out) if args.out else Path("results") / problem.name
+    console = Console()  # stdout: stderr carries only the one-line error of a failed run
+    with console.status("building the scene, objectives, robot and environment"):
+        setup = preflight(problem)  # built once: the solve below takes it as it is
     with Progress(
         TextColumn("{task.description:<10}"),
         BarColumn(),
@@ -63,11 +117,13 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES}
 
         def progress(stage: str, done: int, total: int) -> None:
+            interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
             bars.start_task(tasks[stage])
             bars.update(tasks[stage], completed=done, total=total)
 
         with warnings.catch_warnings(record=True):
-            plan = solve(problem, progress=progress)
+            plan = solve(setup, progress=progress)
+    interrupts.check()
     table = Table(title=f"optlight solve {problem.name}", show_header=False)
     for key, value in _summary_rows(plan.summary()):
         table.add_row(key, value)
@@ -77,7 +133,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     if not plan.verification.passed:
         console.print(plan.verification.summary())
     with console.status(f"writing {out}/ (figures, preview, report)"):
-        plan.save(out, overwrite=True)  # refuses (VerificationError) when verification failed
+        plan.save(out, overwrite=args.force)  # refuses (VerificationError) when verification failed
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
         plan.preview().show()
@@ -102,18 +158,88 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
     ]
 
 
-def _cmd_reach(args: argparse.Namespace) -> int:
-    from optlight.planning.reach import reachability_map
-    from optlight.setup import Setup
+def _cmd_acquire(args: argparse.Namespace) -> int:
+    from rich.console import Console
 
+    from optlight.acquisition import acquire
+    from optlight.export import check_output_folder
+    from optlight.preflight import preflight
+
+    if args.camera == "folder" and args.images is None:
+        raise UsageError("--images", "the folder camera (--camera folder) needs the folder of the captured images")
+    out = Path(args.out)
+    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
-    setup = Setup.from_problem(problem)
+    console = Console()  # stdout: stderr carries only the one-line error of a failed run
+    with console.status("building the scene, objectives, robot and environment"):
+        setup = preflight(problem)  # built once: the loop's first plan uses it as it is
+    with console.status("") as status:
+
+        def progress(iteration: int, stage: str, done: int, total: int) -> None:
+            interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
+            status.update(f"iteration {iteration}: {stage} {done}/{total}")
+
+        with warnings.catch_warnings(record=True):
+            acquisition = acquire(setup, args.camera, images=args.images, progress=progress)
+    interrupts.check()
+    for it in acquisition.iterations:
+        console.print(
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
+            f"{it.wall_time_s:.1f} s"
+        )
+    best = acquisition.best
+    console.print(
+        f"{acquisition.status}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
+        f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
+    )
+    with console.status(f"writing {out}/"):
+        acquisition.save(out, overwrite=args.force)
+    console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
+    return 0
+
+
+def _cmd_reach(args: argparse.Namespace) -> int:
+    from optlight.export import check_output_folder, write_folder
+    from optlight.planning.reach import reachability_map
+    from optlight.preflight import preflight
+
+    check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)
+    problem = load_problem(args.problem)
+    setup = preflight(problem)
     result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
-    png, js = result.save(args.out)
+    interrupts.check()
+    png, js = write_folder(
+        args.out, lambda folder: result.save(folder), overwrite=args.force, option="--out", force=FORCE
+    )
     print(f"{100 * result.reachable_fraction:.1f}% of the light cap reachable by {problem.robot.name}")
     if result.environment:
         print(f"{100 * result.taken_fraction:.1f}% of it taken by the environment (collision or view)")
     print(f"wrote {png} and {js}")
+    return 0
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from optlight.batch import check_batch_folder, run_batch
+
+    check_batch_folder(Path(args.out), option="--out")  # first: new, empty or an earlier batch's
+    result = run_batch(args.spec, args.out, scheduler=args.scheduler, workers=args.workers)
+    skipped = f", {result.skipped} done before" if result.skipped else ""
+    print(f"{result.ok} of {len(result.records)} rows solved ({result.failed} failed{skipped}) in {result.elapsed_s:.1f} s")
+    for record in result.records:
+        if record.status != "ok":
+            print(f"failed {record.id}: {record.error}", file=sys.stderr)
+    print(f"results: {result.table_md} and {result.table_csv}")
+    return 1 if result.failed else 0
+
+
+def _cmd_cell(args: argparse.Namespace) -> int:
+    from optlight.cell import design_cell
+    from optlight.export import check_output_folder
+
+    check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)  # before any work
+    result = design_cell(args.spec, args.out, scheduler=args.scheduler, workers=args.workers, overwrite=args.force)
+    for line in result.summary_lines():
+        print(line)
     return 0
 
 
@@ -142,13 +268,54 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return int(module.bench(args.names, quick=args.quick, out=Path(args.out) if args.out else None))
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one-line :class:`UsageError` (no usage block)."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(self.prog, f"{message} (see {self.prog} --help)")
+
+
+def number(lo: float, hi: float, unit: str, *, lo_open: bool = False) -> Callable[[str], float]:
+    """An argparse ``type``: a finite number in [lo, hi] (or (lo, hi] with ``lo_open``) in ``unit``,
+    refused in one line that echoes the text as given."""
+    interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+
+    def parse(text: str) -> float:
+        try:
+            x = float(text)
+        except ValueError:
+            x = math.nan
+        if not (math.isfinite(x) and (lo < x if lo_open else lo <= x) and x <= hi):
+            raise argparse.ArgumentTypeError(f"expected a finite number of {unit} in {interval}, got {text}")
+        return x
+
+    return parse
+
+
+def integer(lo: int, hi: int, unit: str) -> Callable[[str], int]:
+    """An argparse ``type``: an integer number of ``unit`` in [lo, hi], refused in one line that
+    echoes the text as given."""
+
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            n = lo - 1
+        if not lo <= n <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer number of {unit} in [{lo}, {hi}], got {text}")
+        return n
+
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with one subparser per command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="optlight",
         description="Camera-driven robotic light source positioning.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    force_help = "replace the output of an earlier optlight run there (only the files optlight wrote)"
 
     def add(name: str, func: Callable[[argparse.Namespace], int], help: str) -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help, description=help)
@@ -159,20 +326,66 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("problem", help="problem file path or built-in name")
     p = add("solve", _cmd_solve, "solve a problem: landmarks, trajectory, verification, results folder")
     p.add_argument("problem", help="problem file path or built-in name")
-    p.add_argument("--out", help="results folder (default: results/<problem name>)")
+    p.add_argument("--out", help="results folder, new or empty (default: results/<problem name>)")
+    p.add_argument("--force", action="store_true", help=force_help)
     p.add_argument(
         "--view", action="store_true", help="serve the live Meshcat preview on 127.0.0.1 afterwards"
     )
+    p = add("acquire", _cmd_acquire, "camera in the loop: plan, capture, calibrate, re-plan; write the dataset")
+    p.add_argument("problem", help="problem file path or built-in name")
+    p.add_argument("--camera", choices=("model", "mitsuba", "folder"), default="model", help="what captures")
+    p.add_argument("--images", help="folder with captures.csv and the images (--camera folder)")
+    p.add_argument("--out", required=True, help="dataset folder, new or empty")
+    p.add_argument("--force", action="store_true", help=force_help)
     p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
     p.add_argument("problem", help="problem file path or built-in name")
-    p.add_argument("--out", required=True, help="output folder for reachability.png and reachability.json")
-    p.add_argument("--zenith-step", type=float, default=5.0, help="grid step in zenith, degrees")
-    p.add_argument("--azimuth-step", type=float, default=10.0, help="grid step in azimuth, degrees")
+    p.add_argument(
+        "--out", required=True, help="output folder, new or empty, for reachability.png and reachability.json"
+    )
+    p.add_argument("--force", action="store_true", help=force_help)
+    p.add_argument(
+        "--zenith-step",
+        type=number(MIN_STEP_DEG, 90.0, "degrees"),
+        default=5.0,
+        help="grid step in zenith, degrees",
+    )
+    p.add_argument(
+        "--azimuth-step",
+        type=number(MIN_STEP_DEG, 360.0, "degrees"),
+        default=10.0,
+        help="grid step in azimuth, degrees",
+    )
     p = add("render", _cmd_render, "render the camera image for one light position")
     p.add_argument("problem", help="problem file path or built-in name")
-    p.add_argument("--zenith", type=float, required=True, help="light zenith, degrees from the camera axis")
-    p.add_argument("--azimuth", type=float, required=True, help="light azimuth, degrees (90 = from above)")
-    p.add_argument("--out", required=True, help="output PNG file")
+    p.add_argument(
+        "--zenith",
+        type=number(0.0, 180.0, "degrees"),
+        required=True,
+        help="light zenith, degrees from the camera axis",
+    )
+    p.add_argument(
+        "--azimuth",
+        type=number(-360.0, 360.0, "degrees"),
+        required=True,
+        help="light azimuth, degrees (90 = from above)",
+    )
+    p.add_argument("--out", required=True, help="output PNG file (not an existing one unless --force)")
+    p.add_argument("--force", action="store_true", help="replace an existing PNG file")
+    p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
+    p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
+    p.add_argument(
+        "--out",
+        required=True,
+        help="output folder, new or empty, or an earlier batch's (resumed): plans/, records/, results.csv, results.md",
+    )
+    _add_engine_arguments(p)
+    p = add("cell", _cmd_cell, "search the robot's (and the camera's) placement for the most lights reached")
+    p.add_argument("spec", help="cell spec file (TOML): a base problem and the ranges to search")
+    p.add_argument(
+        "--out", required=True, help="output folder, new or empty: heat map, candidates, best_problem.toml, best_plan/"
+    )
+    p.add_argument("--force", action="store_true", help=force_help)
+    _add_engine_arguments(p)
     add("problems", _cmd_problems, "list the built-in problems")
     p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
     p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")
@@ -181,17 +394,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--scheduler", metavar="ADDRESS", help="remote Dask scheduler (default: a local cluster on 127.0.0.1)"
+    )
+    p.add_argument(
+        "--workers",
+        type=integer(1, MAX_WORKERS, "worker processes"),
+        metavar="N",
+        help="local cluster worker processes (default: one per core)",
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status."""
-    args = build_parser().parse_args(argv)
+    """Entry point of the console script; returns the exit status (0, 2 for a user mistake, 130
+    after Ctrl-C).
+
+    As the console script (``argv`` None) it ends the process itself once the command is done:
+    SIGINT blocked, streams flushed, ``os._exit``. A Ctrl-C in Python's own shutdown (atexit
+    callbacks, freeing the libraries) would otherwise print "Exception ignored … KeyboardInterrupt"
+    or kill the process with the signal instead of the exit status of the finished command.
+    """
+    # Libraries' log records (trimesh's "unable to use sparse matrix, falling back!" with a traceback)
+    # are not for the user: without a handler Python would print warnings and worse on stderr.
+    root = logging.getLogger()
+    if not any(isinstance(h, logging.NullHandler) for h in root.handlers):
+        root.addHandler(logging.NullHandler())
+    with interrupts.latched():
+        try:
+            code = _run(argv)
+        except KeyboardInterrupt:  # landed after _run's own handlers
+            code = _interrupted()
+        finally:
+            if argv is None and interrupts.in_main_thread():
+                signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    if argv is None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+def _run(argv: Sequence[str] | None) -> int:
+    """Parse the arguments, import what the command needs (Ctrl-C deferred), run it."""
     try:
+        args = build_parser().parse_args(argv)
+        with interrupts.deferred():
+            for module in MODULES.get(args.command, ()):
+                importlib.import_module(module)
         return int(args.func(args))
     except OptlightError as e:
-        print(f"optlight: error: {e}", file=sys.stderr)
+        if interrupts.pending():  # it came of a Ctrl-C IPOPT swallowed (a failed NLP): the interrupt wins
+            return _interrupted()
+        # a failed verification's report lines follow the first; any other error is one line
+        text = str(e) if isinstance(e, VerificationError) else " ".join(str(e).split())
+        print(f"optlight: error: {text}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("optlight: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted()
+    except Exception:
+        if interrupts.pending():  # a library turned the interrupt into its own error (CasADi: RuntimeError)
+            return _interrupted()
+        raise
+
+
+def _interrupted() -> int:
+    print("optlight: interrupted", file=sys.stderr)
+    return 130
 
 
 if __name__ == "__main__":

@@ -1,8 +1,24 @@
 """Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml, captures.csv
 and figures (DESIGN §6–§7).
 
-Nothing is written for a plan that failed verification, and a results folder is never left half
-written: the files go into a hidden sibling folder that is renamed into place at the end.
+Nothing is written for a plan that failed verification, and no output is ever left half written or
+written over files optlight did not write. The output policy (:func:`check_output_folder`,
+:func:`write_folder`, :func:`check_output_file`, :func:`write_file`):
+
+- a folder that does not exist, or an empty one, receives the whole output: the files are written
+  into a hidden staging folder that is renamed into place (or, for an existing empty folder, whose
+  files are renamed into it) at the end;
+- a folder optlight filled before is recognised by its manifest (:data:`MANIFEST`, the list of the
+  files optlight wrote there, written last); it is updated only with ``overwrite`` (the command
+  line's ``--force``), and then only the files it lists are replaced or removed: files the user
+  added there are kept;
+- anything else that exists (a file, a folder holding files optlight did not write, a broken link)
+  is refused with a one-line :class:`UsageError`, before any work when the caller checks first;
+- a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
+  existing file is replaced only with ``overwrite``, a folder never.
+
+The final renames run with Ctrl-C deferred (:func:`optlight.interrupts.deferred`), so an output
+appears whole or not at all; until then an interrupt removes the staging folder or temporary file.
 
 lights.lp follows the PTM / relight convention: the first line is the number of images, then one line
 ``filename x y z`` per image, (x, y, z) the unit vector from the object towards the light with x to
@@ -30,16 +46,19 @@ import os
 import shutil
 import uuid
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.errors import VerificationError
+from optlight import interrupts
+from optlight.errors import UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
+from optlight.spec import image_names
 from optlight.verify import VerificationReport
 
 if TYPE_CHECKING:
@@ -51,6 +70,10 @@ Array = NDArray[np.float64]
 LIBRARIES = ("numpy", "scipy", "casadi", "pin", "toppra", "ruckig", "meshcat", "optlight")
 #: Keys of plan.json written by :func:`write_results` itself; the caller's plan dict may not use them.
 RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
+#: The file optlight writes last into every folder it fills: the files it wrote there (JSON).
+MANIFEST = ".optlight-manifest.json"
+#: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
+STAGING_PREFIX = ".optlight-staging-"
 
 
 def lp_direction(d_camera: ArrayLike) -> Array:
@@ -74,20 +97,6 @@ def lp_text(filenames: Sequence[str], directions_lp: ArrayLike) -> str:
     lines = [str(len(d))]
     lines.extend(f"{name} {x:.9f} {y:.9f} {z:.9f}" for name, (x, y, z) in zip(filenames, d, strict=True))
     return "\n".join(lines) + "\n"
-
-
-def image_names(pattern: str, count: int) -> list[str]:
-    """``pattern.format(index=i)`` for i = 0 … count−1; names must be distinct and free of whitespace."""
-    try:
-        names = [pattern.format(index=i) for i in range(count)]
-    except (KeyError, IndexError, ValueError) as e:
-        raise ValueError(f"image pattern {pattern!r} must format with only {{index}} ({e})") from None
-    if len(set(names)) != len(names):
-        raise ValueError(f"image pattern {pattern!r} gives repeated names; use {{index}}")
-    bad = [n for n in names if not n or any(c.isspace() for c in n)]
-    if bad:
-        raise ValueError(f"image names may not be empty or contain whitespace (.lp format): {bad[0]!r}")
-    return names
 
 
 def _yaml_float(x: float) -> str:
@@ -250,12 +259,14 @@ def write_results(
     overwrite: bool = False,
     csv_rate_hz: float = 100.0,
 ) -> list[Path]:
-    """Write a verified plan into ``folder`` and return the paths written.
+    """Write a verified plan into ``folder`` (the output policy of the module docstring) and return
+    the paths written.
 
     Files: ``trajectory.csv`` (:meth:`Trajectory.to_csv` at ``csv_rate_hz`` plus the boundaries),
     ``plan.json`` (``plan_dict`` plus the verification report, the trajectory's timing, library
     versions and the creation time), ``lights.lp`` (one line per capture, in capture order, names
-    from ``image_pattern.format(index=i)``) and ``<name>.png`` for each of ``figures``.
+    from ``image_pattern.format(index=i)``) and ``<name>.png`` for each of ``figures``; then the
+    manifest.
 
     Args:
         light_directions_camera: (M, 3) unit vectors from the object towards the light at each capture,
@@ -263,12 +274,12 @@ def write_results(
         writers: callables that write further files (figures, preview, report) into the folder they
             are given and return the paths they wrote; they run before plan.json is written, so the
             folder appears with all of them or not at all.
-        overwrite: replace an existing non-empty ``folder``; otherwise that is an error.
+        overwrite: update a folder optlight filled before (only the files its manifest lists).
 
     Raises:
         VerificationError: the report failed; nothing is written.
-        ValueError, FileExistsError, TypeError: bad inputs, an existing folder, data JSON cannot hold;
-            raised before anything is written.
+        UsageError: ``folder`` may not receive the results (:func:`check_output_folder`).
+        ValueError, TypeError: bad inputs, data JSON cannot hold; raised before anything is written.
     """
     folder = Path(folder)
     if not report.passed:
@@ -293,13 +304,10 @@ def write_results(
     for name in figures or {}:
         if not name or Path(name).name != name or name.startswith("."):
             raise ValueError(f"figure name {name!r} must be a plain file stem")
-    if folder.exists() and not (folder.is_dir() and not any(folder.iterdir())) and not overwrite:
-        raise FileExistsError(f"{folder} exists and is not empty; pass overwrite=True to replace it")
 
     def plan_text(files: list[str]) -> str:
         return json.dumps({**plan, "files": files}, indent=2, allow_nan=False) + "\n"
 
-    files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
     plan = {
         **json_safe(dict(plan_dict)),
         "verification": report.to_dict(),
@@ -316,12 +324,10 @@ def write_results(
         "versions": library_versions(),
         "created_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
-    plan_text(files)  # fails here, before anything is written, when plan_dict holds non-JSON data
+    plan_text([])  # fails here, before anything is written, when plan_dict holds non-JSON data
 
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    staging = folder.parent / f".{folder.name}.tmp-{uuid.uuid4().hex[:8]}"
-    staging.mkdir()
-    try:
+    def write(staging: Path) -> list[Path]:
+        files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
         trajectory.to_csv(staging / "trajectory.csv", joint_names, rate_hz=csv_rate_hz)
         (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
         for name, figure in (figures or {}).items():
@@ -329,26 +335,219 @@ def write_results(
         for writer in writers:
             files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
         (staging / "plan.json").write_text(plan_text(files))
-        _move_into_place(staging, folder)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    return [folder / f for f in files]
+        return [staging / f for f in files]
+
+    return write_folder(folder, write, overwrite=overwrite)
 
 
-def _move_into_place(staging: Path, folder: Path) -> None:
-    """Rename ``staging`` to ``folder``, replacing what is there (the old folder is deleted last)."""
-    if not folder.exists():
+# --------------------------------------------------------------------------------------------
+# The output policy
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class OutputTarget:
+    """Where an output goes, as :func:`check_output_folder` / :func:`check_output_file` found it.
+
+    ``path`` the folder or file; ``anchor`` the existing folder the staging folder or temporary file
+    goes in (the folder itself when it exists, else its nearest existing ancestor, so nothing is
+    created outside it before the final rename); ``exists`` whether ``path`` exists; ``previous``
+    the files a folder's manifest lists (those ``overwrite`` may replace or remove).
+    """
+
+    path: Path
+    anchor: Path
+    exists: bool
+    previous: tuple[str, ...] = ()
+
+
+def check_output_folder(
+    folder: str | Path, *, overwrite: bool = False, option: str = "folder", force: str = "overwrite=True"
+) -> OutputTarget:
+    """Whether ``folder`` may receive an output folder (module docstring), and where to stage it.
+
+    ``option`` names the folder in errors (``--out`` on the command line), ``force`` what the
+    caller passes to allow replacing an earlier output. Raises :class:`UsageError` for an existing
+    file or broken link, a non-empty folder without a valid manifest, an earlier output without
+    ``overwrite``, and a location where nothing can be written (tried by creating and removing a
+    staging folder there). Writes nothing that stays.
+    """
+    path = Path(folder)
+    if path.is_symlink() and not path.exists():
+        raise UsageError(option, f"{path} is a broken symbolic link; give a new or empty folder")
+    if not path.exists():
+        anchor = _existing_ancestor(path, option)
+        _probe(anchor, option)
+        return OutputTarget(path, anchor, exists=False)
+    if not path.is_dir():
+        raise UsageError(
+            option, f"{path} is an existing file; optlight writes a folder there: give a new or empty folder"
+        )
+    try:
+        entries = list(path.iterdir())
+    except OSError as e:
+        raise UsageError(option, f"cannot read the folder {path} ({e.strerror})") from None
+    previous: tuple[str, ...] = ()
+    if entries:
+        listed = _read_manifest(path)
+        if listed is None:
+            raise UsageError(
+                option,
+                f"{path} is not empty and holds files optlight did not write; give a new or empty folder "
+                "(optlight never replaces files it did not write)",
+            )
+        if not overwrite:
+            raise UsageError(
+                option,
+                f"{path} holds the output of an earlier optlight run; pass {force} to replace it "
+                "(files you added there are kept)",
+            )
+        previous = listed
+    _probe(path, option)
+    return OutputTarget(path, path, exists=True, previous=previous)
+
+
+def write_folder(
+    folder: str | Path,
+    write: Callable[[Path], Sequence[Path]],
+    *,
+    overwrite: bool = False,
+    option: str = "folder",
+    force: str = "overwrite=True",
+) -> list[Path]:
+    """Fill ``folder`` with the files ``write(staging)`` writes into the staging folder it is given
+    (it returns their paths), following the output policy; returns the paths in ``folder``.
+
+    The staging folder is removed when ``write`` raises or Ctrl-C arrives before the final renames;
+    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises, and
+    :class:`UsageError` (nothing changed) when a file to write exists in the folder without being
+    listed in its manifest (it appeared after the check).
+    """
+    target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
+    staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
+    try:
+        with interrupts.deferred():  # created, then removed by the finally below: never left behind
+            staging.mkdir()
+        files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
+        names = sorted({str(f) for f in files})
+        (staging / MANIFEST).write_text(
+            json.dumps({"written_by": f"optlight {_version()}", "files": names}, indent=1) + "\n"
+        )
+        interrupts.check()  # an interrupt a library swallowed while writing
+        with interrupts.deferred():
+            _move_into_place(staging, target, names, option)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
+    return [target.path / f for f in files]
+
+
+def check_output_file(
+    path: str | Path, *, overwrite: bool = False, option: str = "file", force: str = "overwrite=True"
+) -> OutputTarget:
+    """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
+    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`."""
+    out = Path(path)
+    if out.is_dir():
+        raise UsageError(option, f"{out} is a folder; give the path of the file to write")
+    exists = out.exists() or out.is_symlink()
+    if exists and not overwrite:
+        raise UsageError(option, f"{out} exists; pass {force} to replace it")
+    anchor = _existing_ancestor(out, option)
+    _probe(anchor, option)
+    return OutputTarget(out, anchor, exists=exists)
+
+
+def write_file(
+    path: str | Path,
+    write: Callable[[Path], object],
+    *,
+    overwrite: bool = False,
+    option: str = "file",
+    force: str = "overwrite=True",
+) -> Path:
+    """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
+    rename it to ``path`` (missing folders above it created then), following the output policy."""
+    target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+    out = target.path
+    temporary = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}{out.suffix}"
+    try:
+        write(temporary)
+        interrupts.check()
+        with interrupts.deferred():
+            out.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(temporary, out)
+    finally:
+        temporary.unlink(missing_ok=True)
+    return out
+
+
+def _existing_ancestor(path: Path, option: str) -> Path:
+    """The nearest existing folder at or above ``path``'s parent; a file there is refused."""
+    anchor = path.absolute().parent
+    while not anchor.exists():
+        anchor = anchor.parent
+    if not anchor.is_dir():
+        raise UsageError(option, f"{anchor} is a file, so {path} cannot be created")
+    return anchor
+
+
+def _probe(folder: Path, option: str) -> None:
+    """Refuse a folder where optlight cannot create (and remove) a staging folder."""
+    probe = folder / f"{STAGING_PREFIX}probe-{uuid.uuid4().hex[:12]}"
+    try:
+        with interrupts.deferred():  # never left behind
+            probe.mkdir()
+            probe.rmdir()
+    except OSError as e:
+        raise UsageError(option, f"cannot write in {folder} ({e.strerror or e})") from None
+
+
+def _read_manifest(folder: Path) -> tuple[str, ...] | None:
+    """The files the folder's manifest lists, or None when it has no valid manifest (a listed path
+    must be relative and stay inside the folder)."""
+    try:
+        data = json.loads((folder / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    files = data.get("files") if isinstance(data, dict) else None
+    if not isinstance(files, list) or not all(isinstance(f, str) and f for f in files):
+        return None
+    for f in files:
+        p = PurePosixPath(f)
+        if p.is_absolute() or ".." in p.parts or str(p) == MANIFEST or "\\" in f:
+            return None
+    return tuple(files)
+
+
+def _move_into_place(staging: Path, target: OutputTarget, names: Sequence[str], option: str) -> None:
+    """Rename the staged output into place: the staging folder itself when the folder is new, else
+    each file into the folder (then remove the files of the earlier output that the new one does not
+    have), the manifest last."""
+    folder = target.path
+    if not target.exists:
+        folder.parent.mkdir(parents=True, exist_ok=True)
         os.rename(staging, folder)
         return
-    old = folder.parent / f".{folder.name}.old-{uuid.uuid4().hex[:8]}"
-    os.rename(folder, old)
+    previous = set(target.previous)
+    for name in names:
+        dest = folder / name
+        if (dest.exists() or dest.is_symlink()) and name not in previous:
+            raise UsageError(
+                option, f"{dest} appeared and was not written by optlight; move it away (nothing was changed)"
+            )
+    for name in names:
+        dest = folder / name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(staging / name, dest)
+    for name in sorted(previous - set(names)):
+        old = folder / name
+        if old.is_file() or old.is_symlink():
+            old.unlink()
+    os.replace(staging / MANIFEST, folder / MANIFEST)
+
+
+def _version() -> str:
     try:
-        os.rename(staging, folder)
-    except BaseException:
-        os.rename(old, folder)
-        raise
-    if old.is_dir():
-        shutil.rmtree(old)
-    else:
-        old.unlink()
+        return importlib.metadata.version("optlight")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"

@@ -125,7 +125,8 @@ class Plan:
 
     def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
         """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
-        plan failed verification. Returns the paths written."""
+        plan failed verification. ``folder`` must be new, empty or, with ``overwrite``, an earlier
+        optlight output (the output policy of :mod:`optlight.export`). Returns the paths written."""
         return save_results(
             folder,
             setup=self.setup,

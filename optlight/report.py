@@ -187,7 +187,10 @@ def save_results(
     overwrite: bool = False,
 ) -> list[Path]:
     """Write the results folder of a verified plan (see the module docstring); returns the paths.
-    ``preview(path)`` writes ``preview.html`` (left out when None)."""
+    ``preview(path)`` writes ``preview.html`` (left out when None).
+
+    ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
+    the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
     robot, limits = setup.robot, setup.limits
     timed = trajectory.sample(trajectory.sample_times(20.0))[0]
     figures = {

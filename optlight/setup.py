@@ -50,6 +50,7 @@ from optlight.spec import (
     Problem,
     SolverSpec,
     TrajectorySpec,
+    check_memory,
     load_problem,
 )
 
@@ -100,6 +101,7 @@ class Setup:
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
         """Build the setup of a problem (a :class:`Problem`, a file path or a built-in name)."""
         problem = problem if isinstance(problem, Problem) else load_problem(problem)
+        check_memory(problem)  # this machine's memory (spec.check_memory), before the large allocations
         scene = Scene.from_problem(problem)
         search_scene = _search_scene(scene, problem.landmarks.resolution)
         objective = Objective.from_problem(problem, scene)

@@ -83,7 +83,7 @@ class ObjectSpec:
     camera, +y up (DESIGN §2), so a mesh's front is its +z side and its top is +y."""
 
     kind: Literal["face", "sphere", "mesh"] = key("face", "what the camera looks at")
-    center_m: Vec3 = key((0.35, 0.0, 0.45), "object centre O in the world frame", unit="m")
+    center_m: Vec3 = key((0.5, 0.0, 0.4), "object centre O in the world frame", unit="m")
     radius_m: float = key(0.1, "sphere radius (kind = sphere)", unit="m", lo=0.0, lo_open=True)
     path: str | None = key(None, "mesh file trimesh reads: OBJ, PLY, STL, GLB (kind = mesh)")
     scale: float = key(1.0, "factor from mesh units to metres (kind = mesh)", lo=0.0, lo_open=True)
@@ -95,7 +95,7 @@ class ObjectSpec:
 class CameraSpec:
     """Pinhole camera, OpenCV axes (z forward, y down), placed by position and look-at point."""
 
-    position_m: Vec3 = key((-0.343, -0.4, 0.45), "camera centre in the world frame", unit="m")
+    position_m: Vec3 = key((-0.151, 0.376, 0.674), "camera centre in the world frame", unit="m")
     look_at_m: Vec3 | None = key(
         None, "point the optical axis passes through (default: object centre)", unit="m"
     )
@@ -169,7 +169,12 @@ class RobotSpec:
     name: str = key(
         "panda", "robot name (panda, ur3, ur5, ur10, xarm7, kinova, z1), or a label when urdf is set"
     )
-    urdf: str | None = key(None, "path of a user URDF instead of a named robot")
+    urdf: str | None = key(
+        None,
+        "path of a user URDF instead of a named robot; its package://NAME/… meshes are looked up as "
+        "ROS does: a folder NAME (or one holding NAME/package.xml) in the URDF's folder or any folder "
+        "above it, then in each folder of the ROS_PACKAGE_PATH environment variable",
+    )
     frame: str | None = key(None, "flange frame the light is attached to (default: the robot's tool frame)")
     base_position_m: Vec3 = key((0.0, 0.0, 0.0), "robot base position in the world frame", unit="m")
     base_rpy_deg: Vec3 = key((0.0, 0.0, 0.0), "robot base roll, pitch, yaw in the world frame", unit="deg")
@@ -308,7 +313,11 @@ class TrajectorySpec:
     )
     max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
     dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
-    image_pattern: str = key("img_{index:03d}.png", "image file names written into lights.lp and captures.csv")
+    image_pattern: str = key(
+        "img_{index:03d}.png",
+        "image file names written into lights.lp and captures.csv: a Python format string of {index} "
+        "(0, 1, …) giving distinct names without whitespace",
+    )
     timing: Literal["jerk_limited", "toppra"] = key(
         "jerk_limited",
         "time each segment with continuous acceleration under the jerk limits, or time-optimally with "
@@ -517,6 +526,88 @@ class LightSetSpec:
 
 
 @dataclass(frozen=True)
+class WorldSpec:
+    """How the real scene differs from the model (DESIGN §11): what the model and physically based
+    cameras of the camera-in-the-loop capture (:mod:`optlight.capture`), never what the planner
+    assumes. Every default is the model itself (a Lambertian object, the exact light, no
+    inter-reflection, a linear camera without noise)."""
+
+    power_scale: float = key(1.0, "real light power over the model's light.power", lo=0.0)
+    ambient: float | None = key(None, "real ambient k_amb (default: the model's light.ambient)", lo=0.0)
+    albedo_scale: float = key(1.0, "factor on the model's albedo", lo=0.0)
+    albedo_texture: float = key(
+        0.0, "relative amplitude of a multiplicative albedo texture, 1 + t·sin·sin·sin of the position", lo=0.0, hi=1.0
+    )
+    texture_period_m: float = key(0.04, "period of the albedo texture", unit="m", lo=0.0, lo_open=True)
+    bsdf: Literal["lambertian", "roughplastic", "principled"] = key(
+        "lambertian", "reflectance of the real surface (the physically based camera; the model camera is Lambertian)"
+    )
+    roughness: float = key(0.3, "surface roughness (roughplastic α, principled roughness)", lo=0.0, hi=1.0, lo_open=True)
+    specular: float = key(
+        0.5, "specular strength (roughplastic specular reflectance, principled specular)", lo=0.0, hi=1.0
+    )
+    light_offset_m: Vec3 = key(
+        (0.0, 0.0, 0.0), "where the real light is, relative to where the robot puts it (world frame)", unit="m"
+    )
+    light_radius_m: float = key(
+        0.0, "radius of the real light's emitting area (0: a point; the physically based camera)", unit="m", lo=0.0
+    )
+    light_profile: Literal["isotropic", "lambertian", "spot"] = key(
+        "isotropic",
+        "angular emission: the same in every direction (point, sphere), cos of the angle to the light's axis "
+        "(a disk facing the object), or a spot beam (point)",
+    )
+    spot_cutoff_deg: float = key(
+        40.0, "half-angle where the spot beam ends (light_profile = spot)", unit="deg", lo=0.0, hi=90.0, lo_open=True
+    )
+    gamma: float = key(1.0, "camera response: recorded value s·(I/s)^(1/gamma)", lo=0.0, lo_open=True)
+    noise_std: float = key(0.0, "sensor noise σ, pixel units, added before the response", lo=0.0)
+    seed: int = key(0, "seed of the sensor noise and of the physically based camera's samples")
+    bounces: int = key(
+        1, "light bounces the physically based camera traces (1: direct light only; more: inter-reflections)", lo=1, hi=32
+    )
+    spp: int = key(64, "samples per pixel of the physically based camera", lo=1, hi=65536)
+
+
+@dataclass(frozen=True)
+class LoopSpec:
+    """The camera in the loop (DESIGN §11): plan, capture at the landmarks, calibrate the model from
+    the captures, re-plan on the calibrated model, until the measured objective stops improving."""
+
+    iterations: int = key(4, "most plan-capture-calibrate rounds (the first is the open-loop plan)", lo=1, hi=50)
+    tolerance: float = key(
+        0.02, "relative decrease of the measured objective below which the loop stops", lo=0.0, hi=1.0
+    )
+    normals: Literal["model", "photometric_stereo"] = key(
+        "model",
+        "normals of the calibrated model: the mesh's, or photometric stereo's where 3 or more lights light a pixel",
+    )
+    saturation_level: float = key(
+        0.98, "normalised camera value from which a pixel counts as saturated (left out of the fit)", lo=0.0, hi=1.0,
+        lo_open=True,
+    )
+    dark_level: float = key(
+        0.02, "normalised camera value below which a whole capture counts as black (its 99th percentile)", lo=0.0, hi=1.0
+    )
+    max_saturated_fraction: float = key(
+        0.5, "a capture with more of its object pixels saturated is left out of the calibration", lo=0.0, hi=1.0,
+        lo_open=True,
+    )
+    min_cosine: float = key(
+        0.1, "smallest modelled shading v·max(0, n·l) of a lit pixel in the fit; dimmer lit pixels (shadow edges) are left out",
+        lo=0.0, hi=1.0,
+    )
+    specular_mad: float = key(
+        3.0, "pixels brighter than the fit by more than this many robust deviations (MAD) count as specular", lo=0.0,
+        lo_open=True,
+    )
+    servo_steps: int = key(8, "captures of the local photometric servo", lo=1, hi=1000)
+    servo_step_deg: float = key(
+        4.0, "first step of the photometric servo along the light sphere", unit="deg", lo=0.0, hi=45.0, lo_open=True
+    )
+
+
+@dataclass(frozen=True)
 class Problem:
     """A whole light-positioning problem."""
 
@@ -533,6 +624,8 @@ class Problem:
     environment: EnvironmentSpec = section(EnvironmentSpec, "obstacles, self-collision, the camera's view")
     lightset: LightSetSpec = section(LightSetSpec, "lights designed as a set (photometric stereo, RTI, grid)")
     view: ViewSpec = section(ViewSpec, "the camera's view of the object, kept clear of the robot and the light")
+    world: WorldSpec = section(WorldSpec, "how the real scene differs from the model (the cameras in the loop)")
+    loop: LoopSpec = section(LoopSpec, "the camera in the loop: capture, calibrate, re-plan")
     source: Path | None = field(default=None, compare=False, metadata={"internal": True})
 
     @property
@@ -550,6 +643,86 @@ class Problem:
     def to_dict(self) -> dict[str, Any]:
         """The problem as plain data (for plan.json): every set key, defaults included."""
         return _to_plain(self)
+
+
+# --------------------------------------------------------------------------------------------
+# What a run will need: image names, memory
+# --------------------------------------------------------------------------------------------
+
+
+def image_names(pattern: str, count: int) -> list[str]:
+    """``pattern.format(index=i)`` for i = 0 … count−1; names must be distinct and free of whitespace
+    (lights.lp separates fields by spaces). Raises ValueError saying what is wrong."""
+    try:
+        names = [pattern.format(index=i) for i in range(count)]
+    except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
+        raise ValueError(f"image pattern {pattern!r} must format with only {{index}} ({e!r})") from None
+    if len(set(names)) != len(names):
+        raise ValueError(f"image pattern {pattern!r} gives repeated names; use {{index}}")
+    bad = [n for n in names if not n or any(c.isspace() for c in n)]
+    if bad:
+        raise ValueError(f"image names may not be empty or contain whitespace (.lp format): {bad[0]!r}")
+    return names
+
+
+#: Peak memory of a solve, measured as the growth of ru_maxrss on the default problem (whole solves
+#: at 256²–1024² pixels with 32 bins; the landmark search at 512² with 32–1024 bins): a fixed part
+#: (the libraries, the robot, the NLPs) plus, per object pixel at the camera's resolution, about 800
+#: bytes (rays, G-buffer, the CasADi luminance model's constant matrices) and 72 bytes per histogram
+#: bin (the soft histogram's pixels × bins arrays). The constants below round those up; every image
+#: pixel is counted as an object pixel, since the object may fill the image.
+MEMORY_BASE_BYTES = 600e6
+MEMORY_BYTES_PER_PIXEL = 1200.0
+MEMORY_BYTES_PER_PIXEL_BIN = 80.0
+#: Fraction of the available memory a run may plan to use (the rest: other processes, estimate error).
+MEMORY_SAFETY = 0.8
+
+
+def estimated_peak_memory(problem: Problem) -> float:
+    """Bytes a solve of ``problem`` is expected to hold at its peak (see :data:`MEMORY_BASE_BYTES`):
+    base + W·H·(per pixel + per pixel and bin · objective.bins)."""
+    pixels = problem.camera.width * problem.camera.height
+    per_pixel = MEMORY_BYTES_PER_PIXEL + MEMORY_BYTES_PER_PIXEL_BIN * problem.objective.bins
+    return MEMORY_BASE_BYTES + pixels * per_pixel
+
+
+def available_memory() -> float | None:
+    """Bytes of memory a new allocation can get without swapping: MemAvailable from /proc/meminfo
+    (Linux), else the free physical pages (``os.sysconf``); None where neither is known."""
+    import os
+
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(problem: Problem) -> None:
+    """Raise :class:`ProblemError` (key ``camera.width``) when the solve's estimated peak memory
+    (:func:`estimated_peak_memory`) exceeds :data:`MEMORY_SAFETY` of the memory available now;
+    unchecked where that is unknown. A check of this machine, not of the file: it runs where the
+    problem is built (:class:`optlight.setup.Setup`), not when the file is loaded, so a problem
+    loaded on one machine can be solved on another with more memory."""
+    available = available_memory()
+    need = estimated_peak_memory(problem)
+    if available is None or need <= MEMORY_SAFETY * available:
+        return
+    cam = problem.camera
+    raise ProblemError(
+        str(problem.source) if problem.source else "<inline>",
+        "camera.width",
+        f"a camera.width × camera.height image whose solve fits in memory: {cam.width} × {cam.height} "
+        f"pixels with {problem.objective.bins} objective.bins needs about {need / 1e9:.1f} GB, "
+        f"{available / 1e9:.1f} GB is available; lower camera.width and camera.height",
+        cam.width,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -661,12 +834,12 @@ def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ProblemError(file, where, "an integer", value)
-        _check_range(float(value), meta, where, file)
+        _check_range(value, meta, where, file)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
             raise ProblemError(file, where, "a finite number", value)
-        _check_range(float(value), meta, where, file)
+        _check_range(value, meta, where, file)
         return float(value)
     if tp is str:
         if not isinstance(value, str):
@@ -676,6 +849,7 @@ def _convert(tp: Any, value: Any, meta: Any, where: str, file: str) -> Any:
 
 
 def _check_range(x: float, meta: Any, where: str, file: str) -> None:
+    """``x`` (as the file wrote it, int or float) within the key's declared range."""
     lo, hi, lo_open = meta.get("lo"), meta.get("hi"), meta.get("lo_open", False)
     unit = f" {meta.get('unit')}" if meta.get("unit") else ""
     if lo is not None and (x < lo or (lo_open and x == lo)):
@@ -757,6 +931,15 @@ def _check_consistency(p: Problem, file: str) -> None:
             raise ProblemError(file, "robot.urdf", "an existing URDF file", p.robot.urdf)
         if p.robot.frame is None:
             raise ProblemError(file, "robot.frame", "the flange frame name (robot.urdf is set)")
+    try:
+        image_names(p.trajectory.image_pattern, p.landmarks.count)
+    except ValueError as e:
+        raise ProblemError(
+            file,
+            "trajectory.image_pattern",
+            f'distinct file names from {{index}}, e.g. "img_{{index:03d}}.png" ({e})',
+            p.trajectory.image_pattern,
+        ) from None
     traj = p.trajectory
     if traj.settle_s >= traj.dwell_s:
         raise ProblemError(
@@ -781,6 +964,14 @@ def _check_consistency(p: Problem, file: str) -> None:
             light.housing_length_m,
         )
     _check_lightset(p, file)
+    if p.world.light_profile == "spot" and p.world.light_radius_m > 0:
+        raise ProblemError(
+            file, "world.light_radius_m", "0 for a spot beam (light_profile = 'spot' is a point light)", p.world.light_radius_m
+        )
+    if p.world.light_radius_m >= ls.radius_m:
+        raise ProblemError(
+            file, "world.light_radius_m", f"a light smaller than the light sphere (< {ls.radius_m:g} m)", p.world.light_radius_m
+        )
 
 
 def _check_lightset(p: Problem, file: str) -> None:

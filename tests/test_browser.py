@@ -88,7 +88,14 @@ def open_preview(page: Page, path: Path) -> np.ndarray:
 
 
 def test_offline_preview_draws_the_robot(tmp_path):
-    problem = problem_from_dict({"robot": {"name": "panda"}, "object": {"face": {"resolution": 48}}})
+    # the paper's layout: the robot at θ_ref stands clear of the face and the sphere on screen
+    problem = problem_from_dict(
+        {
+            "robot": {"name": "panda"},
+            "object": {"face": {"resolution": 48}, "center_m": [0.35, 0.0, 0.45]},
+            "camera": {"position_m": [-0.343, -0.4, 0.45]},
+        }
+    )
     scene = Scene.from_problem(problem, width=32, height=32)
     robot = load_robot(problem)
     landmarks = scene.sphere.position(np.full(8, 0.5), np.linspace(0, 2 * np.pi, 8, endpoint=False))

@@ -4,15 +4,17 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from optlight.errors import VerificationError
-from optlight.export import image_names, json_safe, lp_direction, write_results
+from optlight.errors import UsageError, VerificationError
+from optlight.export import MANIFEST, json_safe, lp_direction, write_file, write_results
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.scene.camera import Camera
+from optlight.spec import image_names
 from optlight.verify import VerificationReport, verify_trajectory
 from optlight.viz.trajectory_figures import save_trajectory_figure, trajectory_figure
 
@@ -171,12 +173,14 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
-def test_existing_folder_needs_overwrite(tmp_path) -> None:
+def tree(folder: Path) -> dict[str, bytes]:
+    """Every file below ``folder`` (hidden ones too) and its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def results_kwargs() -> dict:
     traj, report = plan()
-    out = tmp_path / "run"
-    out.mkdir()
-    (out / "old.txt").write_text("old")
-    kwargs = dict(
+    return dict(
         trajectory=traj,
         report=report,
         plan_dict={},
@@ -184,12 +188,75 @@ def test_existing_folder_needs_overwrite(tmp_path) -> None:
         light_directions_camera=directions(),
         image_pattern="img_{index:03d}.png",
     )
-    with pytest.raises(FileExistsError):
-        write_results(out, **kwargs)
-    assert (out / "old.txt").exists()
-    write_results(out, overwrite=True, **kwargs)
-    assert not (out / "old.txt").exists() and (out / "lights.lp").exists()
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_a_folder_optlight_did_not_write_is_refused_even_with_overwrite(tmp_path) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "thesis.tex").write_text("old")
+    for overwrite in (False, True):
+        with pytest.raises(UsageError, match="optlight did not write"):
+            write_results(out, overwrite=overwrite, **results_kwargs())
+    assert tree(tmp_path) == {"run/thesis.tex": b"old"}
+    (tmp_path / "file.txt").write_text("mine")
+    with pytest.raises(UsageError, match="existing file"):
+        write_results(tmp_path / "file.txt", overwrite=True, **results_kwargs())
+    assert (tmp_path / "file.txt").read_text() == "mine"
+
+
+def test_an_earlier_output_is_replaced_only_with_overwrite_and_user_files_stay(tmp_path) -> None:
+    out = tmp_path / "run"
+    out.mkdir()  # an existing empty folder receives the output
+    first = write_results(out, **results_kwargs())
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert sorted(manifest["files"]) == sorted(f.name for f in first)
+    (out / "notes.md").write_text("mine")
+    (out / "old_figure.png").write_bytes(b"stale")  # as if an earlier run had written it
+    manifest["files"].append("old_figure.png")
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    before = tree(out)
+    with pytest.raises(UsageError, match="earlier optlight run"):
+        write_results(out, **results_kwargs())
+    assert tree(out) == before
+    write_results(out, overwrite=True, **results_kwargs())
+    names = {p.name for p in out.iterdir()}
+    assert names == {*(f.name for f in first), MANIFEST, "notes.md"}  # the stale file is gone
+    assert (out / "notes.md").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging left
+
+
+@pytest.mark.parametrize(
+    "manifest",
+    ['{"files": ["../outside.txt"]}', '{"files": ["/etc/passwd"]}', "not json", '{"files": "a"}', "[]"],
+)
+def test_a_manifest_that_could_reach_outside_the_folder_is_not_trusted(tmp_path, manifest: str) -> None:
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / MANIFEST).write_text(manifest)
+    (tmp_path / "outside.txt").write_text("keep")
+    with pytest.raises(UsageError, match="optlight did not write"):
+        write_results(out, overwrite=True, **results_kwargs())
+    assert (tmp_path / "outside.txt").read_text() == "keep"
+
+
+def test_write_file_replaces_only_with_overwrite_and_never_a_folder(tmp_path) -> None:
+    path = tmp_path / "a" / "b.png"
+    write_file(path, lambda tmp: tmp.write_bytes(b"one"))
+    assert path.read_bytes() == b"one"
+    with pytest.raises(UsageError, match="exists"):
+        write_file(path, lambda tmp: tmp.write_bytes(b"two"))
+    write_file(path, lambda tmp: tmp.write_bytes(b"two"), overwrite=True)
+    assert path.read_bytes() == b"two"
+    with pytest.raises(UsageError, match="is a folder"):
+        write_file(tmp_path / "a", lambda tmp: tmp.write_bytes(b"x"), overwrite=True)
+
+    def broken(tmp: Path) -> None:
+        tmp.write_bytes(b"half")
+        raise OSError("disk full")
+
+    with pytest.raises(OSError, match="disk full"):
+        write_file(path, broken, overwrite=True)
+    assert path.read_bytes() == b"two" and sorted(p.name for p in path.parent.iterdir()) == ["b.png"]
 
 
 def test_bad_inputs_are_rejected_before_writing(tmp_path) -> None:

@@ -13,6 +13,7 @@ from conftest import REACH_ONLY, reduced_problem
 
 import optlight
 from optlight.errors import UnreachableError, VerificationError
+from optlight.export import MANIFEST
 from optlight.geometry import h_residual
 from optlight.plan import joint_path_length
 from optlight.planning.timing import Trajectory
@@ -56,7 +57,8 @@ def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> 
     doc = json.loads((folder / "plan.json").read_text())
     assert doc["verification"]["passed"] is True
     assert len(doc["landmarks"]) == len(plan.visited)
-    assert set(doc["files"]) == names
+    assert set(doc["files"]) == names - {MANIFEST}
+    assert sorted(json.loads((folder / MANIFEST).read_text())["files"]) == sorted(doc["files"])
     lp = (folder / "lights.lp").read_text().splitlines()
     assert int(lp[0]) == len(plan.visited) and len(lp) == len(plan.visited) + 1
     # the .lp direction of each capture is the landmark's direction, in the PTM camera convention

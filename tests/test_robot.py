@@ -11,11 +11,18 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from optlight.errors import RobotError
+from optlight.errors import ProblemError, RobotError
 from optlight.geometry import LightSphere, sphere_frame
 from optlight.robot import SUPPORTED_ROBOTS, Robot, light_angles, light_residual, load_robot
 from optlight.robot.kinematics import symbolic_frame_pose
-from optlight.robot.loading import ROBOTS, JointCoordinates, example_robot_data_dir, placement
+from optlight.robot.loading import (
+    ROBOTS,
+    JointCoordinates,
+    example_robot_data_dir,
+    find_package,
+    placement,
+    resolve_mesh,
+)
 from optlight.spec import RobotSpec, load_problem, problem_from_dict
 
 N_CONFIGS = 200
@@ -171,9 +178,49 @@ def test_unknown_frame_lists_the_frames() -> None:
     assert (
         "'nose'" in str(err.value) and "panda_hand_tcp" in str(err.value) and "panda_link8" in str(err.value)
     )
+    assert str(err.value).startswith("robot.frame:")
+    problem = problem_from_dict({"robot": {"name": "panda", "frame": "nose"}})
+    with pytest.raises(ProblemError) as perr:
+        load_robot(problem)
+    assert perr.value.key == "robot.frame" and "panda_link8" in str(perr.value)
 
 
-def test_user_urdf_relative_to_the_problem_file(tmp_path: Path) -> None:
+def test_package_lookup_follows_ros_conventions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """package://NAME: a folder NAME in (or named by) the URDF's folder or any folder above it, at any
+    depth; then ROS_PACKAGE_PATH, also a package folder a few levels below an entry."""
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    package = tmp_path / "ws" / "src" / "cell_description"
+    urdf = package / "urdf" / "a" / "b" / "c" / "arm.urdf"
+    urdf.parent.mkdir(parents=True)
+    (package / "meshes").mkdir()
+    (package / "package.xml").write_text("<package><name>cell_description</name></package>")
+    mesh = package / "meshes" / "link.stl"
+    mesh.write_bytes(b"solid x\nendsolid x\n")
+    assert find_package("cell_description", urdf) == package  # five folders up
+    assert resolve_mesh("package://cell_description/meshes/link.stl", urdf) == mesh
+    assert resolve_mesh("package://cell_description/meshes/none.stl", urdf) is None
+    assert resolve_mesh("../../../../meshes/link.stl", urdf) == urdf.parent / "../../../../meshes/link.stl"
+    assert resolve_mesh(f"file://{mesh}", urdf) == mesh
+    elsewhere = tmp_path / "other" / "arm.urdf"
+    elsewhere.parent.mkdir()
+    assert find_package("cell_description", elsewhere) is None
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))  # the package is 2 levels below
+    assert find_package("cell_description", elsewhere) == package
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(package))  # the entry is the package itself
+    assert find_package("cell_description", elsewhere) == package
+
+
+def test_example_robot_data_urdf_as_a_user_urdf_resolves_four_folders_up() -> None:
+    """kinova's meshes are package://example-robot-data/…, four folders above its URDF (the issue's case)."""
+    urdf = example_robot_data_dir() / "example-robot-data/robots/kinova_description/robots/kinova.urdf"
+    problem = problem_from_dict(
+        {"robot": {"name": "my kinova", "urdf": str(urdf), "frame": "j2s6s200_end_effector"}}
+    )
+    r = load_robot(problem)
+    assert r.n == 6 and len(r.geometry_model("visual").geometryObjects) > 0
+
+
+def test_user_urdf_relative_to_the_problem_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     source = (
         example_robot_data_dir()
         / "example-robot-data"
@@ -186,7 +233,14 @@ def test_user_urdf_relative_to_the_problem_file(tmp_path: Path) -> None:
     shutil.copy(source, tmp_path / "arms" / "my_ur5.urdf")
     problem_file = tmp_path / "cell.toml"
     problem_file.write_text('[robot]\nname = "my arm"\nurdf = "arms/my_ur5.urdf"\nframe = "tool0"\n')
+    # its meshes are package://example-robot-data/…: not above the copy, so only ROS_PACKAGE_PATH finds them
+    monkeypatch.delenv("ROS_PACKAGE_PATH", raising=False)
+    with pytest.raises(ProblemError, match="package://example-robot-data") as err:
+        load_robot(load_problem(problem_file))
+    assert err.value.key == "robot.urdf"
+    monkeypatch.setenv("ROS_PACKAGE_PATH", f"/nonexistent:{example_robot_data_dir()}")
     r = load_robot(load_problem(problem_file))
+    assert len(r.geometry_model("visual").geometryObjects) > 0
     assert r.name == "my arm" and r.n == 6
     assert np.allclose(r.theta_ref, 0.5 * (r.lower + r.upper))
     for t in configurations(r, 5):

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import copy
+import re
 import subprocess
 import sys
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -207,3 +209,99 @@ def test_limits_take_one_value_or_one_per_joint() -> None:
     assert robot.jerk_limit == (100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0)
     assert robot.acceleration_limit == 4.0
     assert problem_from_dict(problem_from_dict(data).to_dict()).robot == robot
+
+
+# --- what a run needs: memory, image names; values echoed as written ---
+
+_GROWTH = """
+import sys
+from optlight.planning.landmarks import find_landmarks
+from optlight.setup import Setup
+from optlight.spec import load_problem, problem_from_dict
+
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(1024 * int(line.split()[1]) for line in f if line.startswith(key))
+
+n, bins = int(sys.argv[1]), int(sys.argv[2])
+data = load_problem("default").to_dict()
+data["camera"].update(width=n, height=n)
+data["landmarks"].update(count=2)
+data["objective"]["bins"] = bins
+problem = problem_from_dict(data, source=load_problem("default").source)
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")  # reset the peak resident size (VmHWM) to the current one
+before = status("VmRSS:")
+find_landmarks(Setup.from_problem(problem))
+print(status("VmHWM:") - before)
+"""
+
+
+def test_memory_estimate_bounds_the_measured_growth() -> None:
+    """The estimate's per-pixel and per-pixel-and-bin rates bound (and are within 10× of) those of
+    the heaviest part, the Setup (camera-resolution scene and objective) and the landmark search
+    (its search renders, the reported costs at the camera's resolution), measured
+    as its peak resident memory above what the process held before it (Linux: VmHWM reset through
+    /proc/self/clear_refs), in fresh processes at two sizes and two bin counts."""
+    from optlight.spec import MEMORY_BYTES_PER_PIXEL, MEMORY_BYTES_PER_PIXEL_BIN
+
+    def growth(n: int, bins: int) -> float:
+        run = subprocess.run(
+            [sys.executable, "-c", _GROWTH, str(n), str(bins)], capture_output=True, text=True, timeout=300
+        )
+        assert run.returncode == 0, run.stderr
+        return float(run.stdout.split()[-1])
+
+    small, large, many_bins = growth(128, 32), growth(320, 32), growth(320, 128)
+    per_pixel = (large - small) / (320**2 - 128**2)
+    estimate = MEMORY_BYTES_PER_PIXEL + 32 * MEMORY_BYTES_PER_PIXEL_BIN
+    assert 0.1 * estimate <= per_pixel <= estimate, (small, large, many_bins)
+    per_pixel_bin = (many_bins - large) / (96 * 320**2)
+    assert 0.1 * MEMORY_BYTES_PER_PIXEL_BIN <= per_pixel_bin <= MEMORY_BYTES_PER_PIXEL_BIN
+
+
+def test_a_camera_whose_solve_does_not_fit_names_the_key(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Checked where the problem is built (this machine's memory), not when the file is loaded."""
+    import optlight.spec as spec
+
+    problem = problem_from_dict(default_dict())
+    need = spec.estimated_peak_memory(problem)
+    monkeypatch.setattr(spec, "available_memory", lambda: need / spec.MEMORY_SAFETY * 0.99)
+    problem_from_dict(default_dict())  # loading is not refused
+    with pytest.raises(ProblemError) as err:
+        spec.check_memory(problem)
+    assert err.value.key == "camera.width" and "camera.height" in str(err.value) and "GB" in str(err.value)
+    with pytest.raises(ProblemError, match="camera.width"):
+        Setup.from_problem(problem)  # refused before it builds anything
+    monkeypatch.setattr(spec, "available_memory", lambda: need / spec.MEMORY_SAFETY * 1.01)
+    spec.check_memory(problem)
+    monkeypatch.setattr(spec, "available_memory", lambda: None)  # unknown: not checked
+    spec.check_memory(problem)
+
+
+def test_values_are_echoed_as_written() -> None:
+    from optlight.errors import plain
+
+    assert plain(np.float64(1.5)) == "1.5" and plain([np.int64(3), np.float32(0.5)]) == "[3, 0.5]"
+    assert plain(np.array([1.0, 2.0])) == "[1.0, 2.0]" and plain("x") == "'x'"
+    data = default_dict()
+    data["landmarks"]["count"] = 100000
+    with pytest.raises(ProblemError, match=r"got 100000$"):
+        problem_from_dict(data)
+
+
+@pytest.mark.parametrize(
+    ("pattern", "fragment"),
+    [
+        ("img_{foo}.png", "only {index}"),
+        ("img.png", "repeated"),
+        ("a {index}.png", "whitespace"),
+        ("{0}", "only"),
+    ],
+)
+def test_image_patterns_are_checked_with_the_problem(pattern: str, fragment: str) -> None:
+    data = default_dict()
+    data["trajectory"]["image_pattern"] = pattern
+    with pytest.raises(ProblemError, match=re.escape(fragment)) as err:
+        problem_from_dict(data)
+    assert err.value.key == "trajectory.image_pattern"

@@ -23,12 +23,13 @@ PACKAGE = ROOT / "optlight"
 #: Where the light goes (objectives, landmarks) and how the robot gets there (policy, path,
 #: trajectory NLP, timing) both live in planning, above the built setup and below verification.
 LAYERS: list[set[str]] = [
-    {"errors", "jsondata"},
+    {"errors", "jsondata", "interrupts"},
     {"spec"},
     {"geometry"},
     {"scene", "robot"},
     {"objectives", "environment", "photometric_stereo"},
     {"setup"},
+    {"capture"},
     {"planning"},
     {"verify"},
     {"export"},
@@ -36,7 +37,9 @@ LAYERS: list[set[str]] = [
     {"viz"},
     {"report"},
     {"plan"},
-    {"pipeline"},
+    {"pipeline", "preflight"},
+    {"acquisition", "batch"},
+    {"cell"},
     {"cli"},
 ]
 
@@ -157,9 +160,11 @@ def _type_checking_names(source: str) -> list[tuple[str, str]]:
     return [(a.name, s.module or "") for s in block.body if isinstance(s, ast.ImportFrom) for a in s.names]
 
 
-def test_a_solve_builds_each_object_once(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("path", ["library", "cli"])
+def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """One solve with the environment on builds the object mesh, the robot, each objective (camera and
-    search resolution), the environment and its CasADi clearance and view functions once."""
+    search resolution), the environment and its CasADi clearance and view functions once: through
+    ``optlight.solve`` and through ``optlight solve``, whose preflight builds the Setup the solve uses."""
     from optlight import environment, objectives, scene, setup
     from optlight.scene import objects
 
@@ -184,7 +189,13 @@ def test_a_solve_builds_each_object_once(monkeypatch: pytest.MonkeyPatch) -> Non
     count(environment.Environment, "_build_view", "view graph")
     count(environment, "CollisionModel", "collision model")
     problem = reduced_problem("collision", camera_px=64, landmarks={"count": 4, "resolution": 32})
-    optlight.solve(problem)
+    if path == "library":
+        optlight.solve(problem)
+    else:
+        from optlight import cli
+
+        monkeypatch.setattr(cli, "load_problem", lambda name: problem)
+        assert cli.main(["solve", "collision", "--out", str(tmp_path / "out")]) == 0
     assert counts == {
         "object": 1,
         "robot": 1,

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.errors import UnreachableError
+from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
 from optlight.planning.landmarks import Landmark
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
@@ -34,6 +34,9 @@ from optlight.robot import IKResult, generalized_ik
 from optlight.setup import Setup
 
 Array = NDArray[np.float64]
+
+#: Said of a placement NLP that stopped at its iteration limit: it may have needed more, not a reach.
+ITERATION_LIMIT_HINT = " at [solver] max_iter: raise it if the landmark should be reachable"
 
 
 @dataclass(frozen=True)
@@ -175,7 +178,8 @@ def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reache
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
             f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear_of} within "
             f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
-            f"(placement NLP: {placed.message})"
+            f"(placement NLP: {placed.message}"
+            f"{ITERATION_LIMIT_HINT if placed.status == IPOPT_ITERATION_LIMIT else ''})"
         )
         if not setup.landmark_spec.allow_partial:
             raise UnreachableError(

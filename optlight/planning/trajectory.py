@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.errors import SolverError
+from optlight.errors import IPOPT_ITERATION_LIMIT, SolverError, iteration_limit_error
 from optlight.geometry import LightSphere
 from optlight.planning.nlp import (
     arc_rows,
@@ -257,6 +257,8 @@ def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPR
         if not nlp.success and start is not warm:
             nlp = constrained.solve(path, setup.sphere, warm)
         nlp = replace(nlp, time_s=nlp.time_s + free_time)
+    if not nlp.success and nlp.status == IPOPT_ITERATION_LIMIT:
+        raise iteration_limit_error("the trajectory NLP", setup.solver.max_iter)
     if not nlp.success:
         raise SolverError(
             f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "

@@ -38,6 +38,16 @@ configuration uses where there is one, else conservative, and the jerk :data:`DE
 ramp: the acceleration limit reached in 0.05 s, J = a_max / 0.05 s. ``robot.acceleration_limit`` and
 ``robot.jerk_limit`` override them (one value or one per joint).
 
+**User URDFs** (``robot.urdf``). Mesh files are found as ROS finds them (:func:`find_package`):
+``package://NAME/rest`` is ``rest`` inside the package folder NAME, looked up in the URDF's folder
+and every folder above it (nearest first: a folder named NAME, or one holding a folder NAME), then
+in each folder of the ``ROS_PACKAGE_PATH`` environment variable (the folder itself when it is
+named NAME, a folder NAME in it, or one up to :data:`PACKAGE_SEARCH_DEPTH` levels below it holding a
+``package.xml``); ``file://`` and plain paths are files, relative ones relative to the URDF. Every
+mesh must resolve when the robot is loaded; a URDF the parser rejects, a mesh that does not resolve
+and a flange frame it does not have are errors naming ``robot.urdf`` or ``robot.frame``, and the
+parser's own messages on stderr are kept out of the terminal (the first one is quoted in ours).
+
 Kinova's and z1's tool frames point their +x out of the tool; their ``flange`` is rotated by
 Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked (closed).
 ``robot.velocity_scale`` is *not* applied here (the timing applies it).
@@ -46,7 +56,12 @@ Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked
 from __future__ import annotations
 
 import importlib.metadata
-from collections.abc import Sequence
+import os
+import sys
+import tempfile
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -55,7 +70,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.errors import RobotError
+from optlight.errors import ProblemError, RobotError
 from optlight.robot.kinematics import (
     CONTINUOUS_JOINTS,
     PRISMATIC_JOINTS,
@@ -79,6 +94,9 @@ CONTINUOUS_LIMIT = 2 * np.pi
 DEFAULT_ACCELERATION_LIMIT = 2.0
 #: Where no jerk limit is published: the time (s) to reach the acceleration limit, J = a_max / ramp.
 DEFAULT_JERK_RAMP_S = 0.05
+
+#: How many folder levels below a ``ROS_PACKAGE_PATH`` entry :func:`find_package` looks for a package.
+PACKAGE_SEARCH_DEPTH = 3
 
 _UR_REFERENCE = (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0)
 
@@ -373,12 +391,16 @@ class Robot:
         """Collision or visual geometry of the robot, consistent with :attr:`model`: locked joints
         reduced away, base placement applied. Meshes are read from the URDF's packages."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
-        full = pin.buildModelFromUrdf(str(self.urdf_path))
         dirs = [str(p) for p in self.package_dirs]
-        try:
-            geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs)
-        except (RuntimeError, ValueError) as e:
-            raise RobotError(f"{self.name}: cannot read the {kind} meshes of {self.urdf_path}: {e}") from None
+        with quiet_stderr() as said:
+            try:
+                full = pin.buildModelFromUrdf(str(self.urdf_path))
+                geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs)
+            except (RuntimeError, ValueError) as e:
+                detail = _first_error(said, e)
+                raise RobotError(
+                    f"{self.name}: cannot read the {kind} meshes of {self.urdf_path}: {detail}"
+                ) from None
         if self.locked_joints:
             ids = [full.getJointId(j) for j in self.locked_joints]
             q = pin.neutral(full)
@@ -410,20 +432,143 @@ def _find_frame(model: pin.Model, name: str, robot: str) -> int:
     for ftype in (pin.FrameType.OP_FRAME, pin.FrameType.BODY, pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT):
         if model.existFrame(name, ftype):
             return int(model.getFrameId(name, ftype))
-    names = sorted({f.name for f in model.frames if f.type != pin.FrameType.JOINT})
-    raise RobotError(f"{robot}: no frame {name!r}; available frames: {', '.join(names)}")
+    raise RobotError(f"{robot}: no frame {name!r}; available frames: {', '.join(_frame_names(model))}")
+
+
+def _frame_names(model: pin.Model) -> list[str]:
+    return sorted({f.name for f in model.frames if f.type != pin.FrameType.JOINT})
+
+
+# --------------------------------------------------------------------------------------------
+# User URDFs: the parser's stderr, package:// lookup, mesh files
+# --------------------------------------------------------------------------------------------
+
+
+@contextmanager
+def quiet_stderr() -> Iterator[list[str]]:
+    """Send what C/C++ code writes on file descriptor 2 (urdfdom's "Error: …" lines) to a
+    temporary file instead of the terminal; the yielded list holds those lines after the block."""
+    said: list[str] = []
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to redirect
+        yield said
+        return
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield said
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            said.extend(sink.read().decode(errors="replace").splitlines())
+
+
+def _first_error(said: Sequence[str], error: Exception) -> str:
+    """The parser's first "Error:" line when it printed one, else the exception's message."""
+    for line in said:
+        if line.strip().startswith("Error:"):
+            return f"{error} ({line.strip()[6:].strip()})"
+    return str(error)
+
+
+def find_package(name: str, urdf: Path) -> Path | None:
+    """The folder of the ROS package ``name`` for the URDF at ``urdf``, or None.
+
+    Looked up as ROS does, in this order: the URDF's folder and every folder above it, nearest first
+    (the folder itself when it is named ``name``, else a folder ``name`` in it); then each folder of
+    ``ROS_PACKAGE_PATH`` (the folder itself when it is named ``name``, a folder ``name`` in it, or a
+    folder ``name`` holding a ``package.xml`` up to :data:`PACKAGE_SEARCH_DEPTH` levels below it).
+    """
+    for folder in (urdf.parent, *urdf.parent.parents):
+        if folder.name == name:
+            return folder
+        if (folder / name).is_dir():
+            return folder / name
+    for entry in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep):
+        if not entry:
+            continue
+        root = Path(entry).expanduser()
+        if root.name == name and root.is_dir():
+            return root
+        if (root / name).is_dir():
+            return root / name
+        level = [root]
+        for _ in range(PACKAGE_SEARCH_DEPTH):
+            level = [d for f in level for d in _subfolders(f)]
+            for d in level:
+                if d.name == name and (d / "package.xml").is_file():
+                    return d
+    return None
+
+
+def _subfolders(folder: Path) -> list[Path]:
+    """The visible subfolders of ``folder`` (none where it cannot be read)."""
+    try:
+        return sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith("."))
+    except OSError:
+        return []
+
+
+def resolve_mesh(filename: str, urdf: Path) -> Path | None:
+    """The file a URDF ``<mesh filename=…>`` names (``package://``, ``file://`` or a path, relative
+    to the URDF), or None when it does not exist."""
+    if filename.startswith("package://"):
+        name, _, rest = filename[len("package://") :].partition("/")
+        package = find_package(name, urdf)
+        path = package / rest if package is not None else None
+    elif filename.startswith("file://"):
+        path = Path(filename[len("file://") :])
+    else:
+        path = Path(filename).expanduser()
+        path = path if path.is_absolute() else urdf.parent / path
+    return path if path is not None and path.is_file() else None
+
+
+def _urdf_package_dirs(urdf: Path, file: str) -> list[Path]:
+    """Check that every mesh of a user URDF resolves (module docstring); return the folders to give
+    pinocchio as ``package_dirs`` (it looks for ``dir/NAME/rest``): each package's parent folder."""
+    try:
+        root = ET.parse(urdf).getroot()
+    except (ET.ParseError, OSError, UnicodeDecodeError) as e:
+        raise ProblemError(file, "robot.urdf", f"a URDF file (XML: {e})", str(urdf)) from None
+    dirs: list[Path] = []
+    for mesh in root.iter("mesh"):
+        filename = mesh.get("filename", "")
+        found = resolve_mesh(filename, urdf)
+        if found is None:
+            raise ProblemError(
+                file,
+                "robot.urdf",
+                f"a URDF whose meshes exist ({filename!r} does not resolve: package://NAME is looked up in "
+                "the URDF's folder and those above it, then in ROS_PACKAGE_PATH)",
+                str(urdf),
+            )
+        if filename.startswith("package://"):
+            name = filename[len("package://") :].split("/", 1)[0]
+            package = find_package(name, urdf)
+            assert package is not None  # resolve_mesh found the file in it
+            if package.parent not in dirs:
+                dirs.append(package.parent)
+    return dirs
 
 
 def load_robot(source: Problem | RobotSpec | str) -> Robot:
     """The robot of a problem, a ``[robot]`` spec, or a robot name from :data:`SUPPORTED_ROBOTS`.
 
     A relative ``urdf`` path is resolved against the problem file (``Problem``) or the working
-    directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file, an
-    unknown frame or an unsupported joint type, listing what is available.
+    directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file or an
+    unsupported joint type, listing what is available; from a ``Problem``, a user URDF that does not
+    parse or whose meshes do not resolve, and an unknown frame, are :class:`ProblemError` naming
+    ``robot.urdf`` and ``robot.frame`` (from a spec or name, RobotError naming the key).
     """
+    file: str | None = None
     if isinstance(source, Problem):
         spec = source.robot
         urdf = source.resolve(spec.urdf) if spec.urdf is not None else None
+        file = str(source.source) if source.source else "<inline>"
     elif isinstance(source, RobotSpec):
         spec = source
         urdf = Path(spec.urdf).expanduser().resolve() if spec.urdf is not None else None
@@ -438,7 +583,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             raise RobotError("robot.frame: a user URDF needs the name of its flange frame")
         info = RobotInfo(str(urdf), None, spec.frame)
         urdf_path, srdf_path = urdf, None
-        package_dirs = [urdf.parent, *urdf.parents[:3]]
+        package_dirs = _urdf_package_dirs(urdf, file or str(urdf))
     else:
         if spec.name not in ROBOTS:
             raise RobotError(
@@ -452,10 +597,15 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         srdf_path = robots / info.srdf if info.srdf else None
         package_dirs = [share]
 
-    try:
-        full = pin.buildModelFromUrdf(str(urdf_path))
-    except (RuntimeError, ValueError) as e:
-        raise RobotError(f"{spec.name}: cannot read {urdf_path}: {e}") from None
+    with quiet_stderr() as said:
+        try:
+            full = pin.buildModelFromUrdf(str(urdf_path))
+        except (RuntimeError, ValueError) as e:
+            if urdf is not None and file is not None:
+                raise ProblemError(
+                    file, "robot.urdf", f"a URDF pinocchio reads ({_first_error(said, e)})", spec.urdf
+                ) from None
+            raise RobotError(f"{spec.name}: cannot read {urdf_path}: {_first_error(said, e)}") from None
 
     # Reference configuration (full model), then lock the hand joints at 0.
     q_full = pin.neutral(full)
@@ -498,6 +648,11 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
 
     # Flange (tool frame with +z out of the tool) and light frames.
     frame_name = spec.frame if spec.frame is not None else info.tool_frame
+    if not model.existFrame(frame_name):
+        expected = f"a frame of {spec.name} ({', '.join(_frame_names(model))})"
+        if file is not None:
+            raise ProblemError(file, "robot.frame", expected, frame_name)
+        raise RobotError(f"robot.frame: expected {expected}, got {frame_name!r}")
     tool = model.frames[_find_frame(model, frame_name, spec.name)]
     for taken in ("flange", "light"):
         if model.existFrame(taken):

@@ -12,6 +12,7 @@ Pixel vectors (P,) follow ``scene.gbuffer.pixel_index`` (row-major object pixels
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from typing import Any
 
@@ -81,6 +82,9 @@ class Scene:
             )
         self._shadow_epsilon = SHADOW_EPSILON * float(obj.mesh.scale)
         self._luminance: dict[bool, ca.Function] = {}
+        #: γ of the camera response s·(I/s)^(1/γ) applied to every rendered value (1: linear); only a
+        #: calibrated scene (:meth:`calibrated`) has another.
+        self.response_gamma = 1.0
 
     @classmethod
     def from_problem(cls, problem: Problem, width: int | None = None, height: int | None = None) -> Scene:
@@ -148,9 +152,8 @@ class Scene:
         """Object pixel values I (P,) from the NumPy renderer (:func:`optlight.scene.render.shade`);
         ``visibility`` None computes it with :meth:`visibility`."""
         v = self.visibility(light_position) if visibility is None else visibility
-        return shade(
-            self.gbuffer, light_position, self.light, self.sphere.center, self.sphere.radius, v, noise
-        )
+        value = shade(self.gbuffer, light_position, self.light, self.sphere.center, self.sphere.radius, v, noise)
+        return value if self.response_gamma == 1.0 else self._respond(value)
 
     def render(self, light_position: ArrayLike, noise: bool | np.random.Generator = False) -> Array:
         """The (H, W) image for a light at ``light_position``, background 0, shadows included."""
@@ -164,7 +167,42 @@ class Scene:
         """The CasADi Function (a, v) -> I of :func:`optlight.scene.luminance.luminance_function`,
         built on first use and cached per ``smooth``."""
         if smooth not in self._luminance:
-            self._luminance[smooth] = luminance_function(
-                self.gbuffer, self.light, self.sphere.center, self.sphere.radius, smooth
-            )
+            f = luminance_function(self.gbuffer, self.light, self.sphere.center, self.sphere.radius, smooth)
+            if self.response_gamma != 1.0:
+                a, v = ca.MX.sym("a", 3), ca.MX.sym("v", self.gbuffer.size)
+                f = ca.Function("luminance", [a, v], [self._respond(f(a, v))], ["a", "v"], ["I"])
+            self._luminance[smooth] = f
         return self._luminance[smooth]
+
+    # ------------------------------------------------------------------------------------------
+    # The calibrated model (the camera in the loop, :mod:`optlight.capture.calibration`)
+    # ------------------------------------------------------------------------------------------
+
+    def calibrated(
+        self,
+        light: LightSpec,
+        albedo: ArrayLike,
+        normals: ArrayLike | None = None,
+        response_gamma: float = 1.0,
+    ) -> Scene:
+        """The same view and object with the light model ``light``, the G-buffer albedo ``albedo``
+        (P,), optionally the G-buffer normals (P, 3, unit), and the camera response
+        I_cam = s·(I/s)^(1/γ) (γ = ``response_gamma``, s = ``light.saturation``) applied to every
+        rendered value (:meth:`pixels`, :meth:`luminance`). Shadow rays still use the mesh.
+        :meth:`resampled` of the result starts again from the object's albedo and normals."""
+        gb = self.gbuffer
+        new_albedo = np.asarray(albedo, float).reshape(gb.size)
+        new_normals = gb.normals if normals is None else np.asarray(normals, float).reshape(gb.size, 3)
+        scene = copy.copy(self)
+        scene.light = light
+        scene.gbuffer = dataclasses.replace(gb, albedo=new_albedo, normals=new_normals)
+        scene.response_gamma = float(response_gamma)
+        scene._luminance = {}
+        return scene
+
+    def _respond(self, value: Any) -> Any:
+        """s·((I/s)₊ + ε)^(1/γ) − s·ε^(1/γ), ε = 1e-12: the response, finite-slope at I = 0 (NumPy or CasADi)."""
+        s, k, eps = self.light.saturation, 1.0 / self.response_gamma, 1e-12
+        if isinstance(value, np.ndarray):
+            return s * ((np.maximum(value / s, 0.0) + eps) ** k - eps**k)
+        return s * ((ca.fmax(value / s, 0) + eps) ** k - eps**k)

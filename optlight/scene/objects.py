@@ -197,10 +197,19 @@ def load_mesh(path: Path, scale: float, albedo: float) -> tuple[trimesh.Trimesh,
     the object frame, and its per-vertex albedo: the luminance of the vertex colours (face colours
     and textures are first turned into vertex colours by trimesh) when the file has colours, else
     the constant ``albedo``. Shading normals are trimesh's vertex normals: the file's where it
-    has them, else the area-weighted face normals of the merged vertices (smooth shading)."""
-    mesh = trimesh.load(path, force="mesh")
+    has them, else the area-weighted face normals of the merged vertices (smooth shading).
+
+    Raises ValueError saying why when the file cannot be used: trimesh cannot read it (any of its
+    exceptions: unknown format, garbage bytes, an encoding it cannot guess), it holds no triangle, or
+    a vertex is not finite."""
+    try:
+        mesh = trimesh.load(path, force="mesh")
+    except Exception as e:  # trimesh's readers raise anything on a malformed file
+        raise ValueError(f"trimesh cannot read it: {type(e).__name__}: {e}") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ValueError(f"{path}: no triangles")
+        raise ValueError("no triangles in it")
+    if not np.isfinite(mesh.vertices).all():
+        raise ValueError("a vertex coordinate is not a finite number")
     visual = mesh.visual
     if isinstance(visual, TextureVisuals) and visual.kind == "texture":
         visual = visual.to_color()
@@ -235,6 +244,9 @@ def build_object(problem: Problem) -> SceneObject:
             mesh, albedo = load_mesh(path, spec.scale, spec.albedo)
         except (ValueError, OSError) as e:
             file = str(problem.source) if problem.source else "<inline>"
-            raise ProblemError(file, "object.path", f"a mesh file with triangles ({e})", spec.path) from None
+            detail = " ".join(str(e).split())[:200]  # one line, whatever the reader said
+            raise ProblemError(
+                file, "object.path", f"a mesh file trimesh reads, with triangles ({detail})", spec.path
+            ) from None
     mesh.apply_transform(transform)
     return SceneObject(mesh=mesh, albedo=np.clip(albedo, 0.0, 1.0), sphere=sphere)

@@ -1,0 +1,476 @@
+"""The camera in the loop (DESIGN §11): plan, capture, calibrate, re-plan; the photometric servo; the
+dataset folder.
+
+:func:`acquire` runs the loop::
+
+    acquisition = optlight.acquire("default", camera="mitsuba")
+    acquisition.save("datasets/face")
+
+1. plan on the model (:func:`optlight.solve`: landmarks, placement, trajectory, verification);
+2. a simulated robot executes the verified trajectory: at each capture's trigger (the dwell's start
+   plus ``[trajectory] settle_s``) the joint angles are the trajectory's, and the light is where
+   pinocchio's forward kinematics puts it (``plan.robot.light_pose``); the camera captures there;
+3. the *measured* cost of the plan is the mean over its captures of the problem's objective on the
+   recorded images (``setup.objective``, never the model that planned); the *modelled* cost the
+   same objective on the planning model's images at the same light positions;
+4. the model is calibrated from every usable capture so far (:func:`~optlight.capture.calibration.calibrate`)
+   and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
+   through the same :func:`optlight.solve`;
+5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
+   least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails (the planner's
+   error is the status; the first plan's error is raised). The best plan by measured cost is the
+   result; the first plan is the open loop's.
+
+With a folder camera the images exist only for the plan the robot ran: the loop captures that
+plan, calibrates, re-plans, and stops with status ``awaiting captures`` and the next plan
+(``next/`` in the dataset) for the robot to run.
+
+:func:`photometric_servo` is the local loop for one light: ViSP's photometric visual servoing with
+the light moving instead of the camera. The error is the measured cost J(Y) of the recorded image;
+its gradient along the light sphere is the chain rule through the calibrated differentiable model,
+∇_{θ,φ} J = (∂I/∂(θ, φ))ᵀ ∇_I J(Y): the image Jacobian (the interaction matrix) from the model, the
+error from the measurement. The light steps by ``servo_step_deg`` against the Riemannian gradient
+(metric dθ² + sin²θ dφ²), the robot reaches the new light by IK, the camera captures; a step that does
+not lower the measured cost is undone and halved.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import casadi as ca
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from optlight.capture import Capture, CaptureCamera, ModelCamera, write_capture_png
+from optlight.capture.calibration import Calibration, calibrate, calibrated_setup
+from optlight.capture.folder import FolderCamera, MissingCaptureError
+from optlight.errors import OptlightError, VerificationError
+from optlight.export import MANIFEST, library_versions, lp_direction, lp_text, write_captures, write_folder
+from optlight.jsondata import json_safe
+from optlight.pipeline import solve
+from optlight.plan import Plan
+from optlight.planning.nlp import sphere_position
+from optlight.robot import generalized_ik
+from optlight.setup import Setup
+from optlight.spec import Problem
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+Array = NDArray[np.float64]
+
+#: Camera kinds :func:`make_camera` builds.
+CAMERAS = ("model", "mitsuba", "folder")
+#: progress(iteration, stage, done, total): the loop's stage ("plan: <solve stage>", "capture",
+#: "calibrate") in the iteration (0-based).
+LoopProgress = Callable[[int, str, int, int], None]
+
+
+def make_camera(kind: str, setup: Setup, images: str | Path | None = None) -> CaptureCamera:
+    """The camera of ``kind`` for ``setup``: the model or Mitsuba camera in the problem's ``[world]``,
+    or the folder camera on ``images`` (linear files: apply a response with :class:`FolderCamera`
+    directly)."""
+    if kind == "model":
+        return ModelCamera(setup.scene, setup.problem.world)
+    if kind == "mitsuba":
+        from optlight.capture.mitsuba import MitsubaCamera
+
+        return MitsubaCamera(setup.scene, setup.problem.world, file=setup.file)
+    if kind == "folder":
+        if images is None:
+            raise OptlightError("the folder camera needs the folder of the images (--images DIR)")
+        return FolderCamera(images, setup.scene.camera, setup.problem.light.saturation)
+    raise OptlightError(f"unknown camera {kind!r} (one of {', '.join(CAMERAS)})")
+
+
+def execute(plan: Plan, camera: CaptureCamera) -> list[Capture]:
+    """The simulated robot runs ``plan``'s trajectory; one capture per dwell at its trigger time, with
+    the light where forward kinematics puts it (module docstring, step 2)."""
+    trajectory = plan.trajectory
+    trigger = trajectory.landmark_intervals[:, 0] + plan.problem.trajectory.settle_s
+    joints = trajectory.sample(trigger)[0]
+    return [camera.capture(plan.robot.light_pose(q)[0], k) for k, q in enumerate(joints)]
+
+
+def measured_costs(setup: Setup, captures: Sequence[Capture]) -> Array:
+    """The problem's objective (``setup.objective``, camera resolution) on each recorded image."""
+    index = setup.scene.gbuffer.pixel_index
+    return np.array([setup.objective.numpy(c.image.ravel()[index]) for c in captures])
+
+
+def modelled_costs(model: Setup, positions: ArrayLike) -> Array:
+    """The objective on ``model``'s own images (NumPy renderer, shadow rays) at light ``positions``."""
+    return np.array([model.objective.numpy(model.scene.pixels(a)) for a in np.asarray(positions, float)])
+
+
+@dataclass(frozen=True, eq=False)
+class Iteration:
+    """One round of the loop: the ``plan`` (made on the model of the previous round's calibration,
+    the problem's model for round 0), its ``captures``, the ``measured`` and ``modelled`` cost of each
+    capture, the ``calibration`` fitted after it (None when it failed: ``calibration_error`` says why)
+    and the round's ``wall_time_s`` (plan, capture and calibration)."""
+
+    index: int
+    plan: Plan
+    captures: tuple[Capture, ...]
+    measured: Array
+    modelled: Array
+    calibration: Calibration | None
+    wall_time_s: float
+    calibration_error: str | None = None
+
+    @property
+    def measured_cost(self) -> float:
+        """Mean measured cost over the captures."""
+        return float(np.mean(self.measured))
+
+    @property
+    def modelled_cost(self) -> float:
+        """Mean modelled cost over the captures."""
+        return float(np.mean(self.modelled))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe: costs, landmarks, wall time, calibration."""
+        sphere = self.plan.setup.sphere
+        zenith, azimuth = sphere.angles(np.array([c.light_position for c in self.captures]))
+        return {
+            "iteration": self.index,
+            "measured_cost": self.measured_cost,
+            "modelled_cost": self.modelled_cost,
+            "measured_per_capture": self.measured,
+            "modelled_per_capture": self.modelled,
+            "landmarks": [
+                {"zenith_deg": float(np.rad2deg(z)), "azimuth_deg": float(np.rad2deg(a)), "light_position_m": c.light_position}
+                for z, a, c in zip(zenith, azimuth, self.captures, strict=True)
+            ],
+            "wall_time_s": self.wall_time_s,
+            "plan_time_s": self.plan.timings.get("total"),
+            "verification_passed": self.plan.verification.passed,
+            "calibration": None if self.calibration is None else self.calibration.to_dict(),
+            "calibration_error": self.calibration_error,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Acquisition:
+    """The result of :func:`acquire`: the problem's ``setup``, the ``camera`` kind, every round in
+    ``iterations``, why the loop stopped (``status``: "stopped improving", "iteration limit",
+    "awaiting captures", "calibration failed", "re-plan failed (…)") and, with a folder camera, the ``next_plan`` to run."""
+
+    setup: Setup
+    camera: str
+    iterations: tuple[Iteration, ...]
+    status: str
+    next_plan: Plan | None = None
+    exposure: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def best(self) -> Iteration:
+        """The round with the lowest measured cost."""
+        return min(self.iterations, key=lambda it: it.measured_cost)
+
+    @property
+    def open_loop(self) -> Iteration:
+        """Round 0: the plan on the problem's own model."""
+        return self.iterations[0]
+
+    @property
+    def calibration(self) -> Calibration | None:
+        """The last calibration fitted (from every usable capture)."""
+        return next((it.calibration for it in reversed(self.iterations) if it.calibration is not None), None)
+
+    def summary(self) -> dict[str, Any]:
+        """The key numbers, JSON-safe."""
+        best, first = self.best, self.open_loop
+        return {
+            "problem": self.setup.problem.name,
+            "camera": self.camera,
+            "status": self.status,
+            "iterations": len(self.iterations),
+            "best_iteration": best.index,
+            "open_loop_measured_cost": first.measured_cost,
+            "best_measured_cost": best.measured_cost,
+            "ratio_best_over_open_loop": best.measured_cost / first.measured_cost if first.measured_cost > 0 else None,
+            "wall_time_per_iteration_s": [it.wall_time_s for it in self.iterations],
+        }
+
+    def figure(self) -> Figure:
+        """Measured and modelled cost per iteration."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(5.5, 3.6))
+        ax = fig.add_subplot()
+        k = [it.index for it in self.iterations]
+        ax.plot(k, [it.measured_cost for it in self.iterations], "o-", label=f"measured ({self.camera} camera)")
+        ax.plot(k, [it.modelled_cost for it in self.iterations], "s--", label="modelled (the planning model)")
+        ax.axvline(self.best.index, color="0.7", lw=0.8)
+        ax.set_xlabel("iteration (0 = open loop)")
+        ax.set_ylabel("mean cost per capture")
+        ax.set_xticks(k)
+        ax.set_title(f"{self.setup.problem.name}: camera in the loop ({self.status})")
+        ax.legend()
+        fig.tight_layout()
+        return fig
+
+    def save(self, folder: str | Path, *, overwrite: bool = False) -> list[Path]:
+        """Write the dataset folder, whole or not at all, and return the files written. ``folder``
+        must be new, empty or, with ``overwrite``, an earlier optlight output of which only the files
+        its manifest lists are replaced; anything else is refused (:class:`UsageError`, nothing
+        written): the output policy of :mod:`optlight.export`.
+
+        - ``captures.csv``, ``lights.lp`` and the images they name: the best round's captures
+          (16-bit PNG, full scale = the saturation value), readable back by :class:`FolderCamera`;
+        - ``iterations/NN/``: every round's images and captures.csv;
+        - ``calibration.json`` (the last calibration's parameters and fit statistics) with
+          ``albedo_factor.npy`` (H, W; 1 where not calibrated) and, when recovered, ``normals.npy``
+          (H, W, 3, world frame, zeros where not recovered);
+        - ``acquisition.json``: per round the measured and modelled cost, the landmarks, the wall time
+          and the calibration; the summary; library versions;
+        - ``measured_cost.png``: :meth:`figure`;
+        - ``next/``: with a folder camera awaiting captures, the next plan's results folder.
+        """
+        return write_folder(folder, lambda staging: [staging / f for f in self._write(staging)], overwrite=overwrite)
+
+    def _write(self, root: Path) -> list[str]:
+        files: list[str] = []
+        for it in self.iterations:
+            sub = Path("iterations") / f"{it.index:02d}"
+            files += [str(sub / f) for f in _write_captures_folder(root / sub, it)]
+        files += _write_captures_folder(root, self.best)
+        calibration = self.calibration
+        if calibration is not None:
+            scene = self.setup.scene
+            (root / "calibration.json").write_text(json.dumps(json_safe(calibration.to_dict()), indent=2) + "\n")
+            np.save(root / "albedo_factor.npy", scene.to_image(calibration.albedo_factor) + ~scene.gbuffer.mask)
+            files += ["calibration.json", "albedo_factor.npy"]
+            if calibration.normals is not None and calibration.normals_valid is not None:
+                h, w = scene.gbuffer.mask.shape
+                normals = np.zeros((h * w, 3))
+                valid = calibration.normals_valid
+                normals[scene.gbuffer.pixel_index[valid]] = calibration.normals[valid]
+                np.save(root / "normals.npy", normals.reshape(h, w, 3))
+                files.append("normals.npy")
+        if self.next_plan is not None:
+            written = self.next_plan.save(root / "next", preview=False)
+            # next/ carries its own manifest (a results folder of its own); the dataset's lists it too
+            files += [str(Path(p).relative_to(root)) for p in written] + [f"next/{MANIFEST}"]
+        self.figure().savefig(root / "measured_cost.png", dpi=120)
+        files.append("measured_cost.png")
+        document = {
+            **self.summary(),
+            "exposure": self.exposure,
+            "loop": self.setup.problem.to_dict().get("loop", {}),
+            "world": self.setup.problem.to_dict().get("world", {}),
+            "iterations_detail": [it.to_dict() for it in self.iterations],
+            "versions": library_versions(),
+            "files": [*files, "acquisition.json"],
+        }
+        (root / "acquisition.json").write_text(json.dumps(json_safe(document), indent=2, allow_nan=False) + "\n")
+        files.append("acquisition.json")
+        return files
+
+
+def _write_captures_folder(folder: Path, iteration: Iteration) -> list[str]:
+    """An iteration's images, captures.csv and lights.lp in ``folder``; returns the names written."""
+    plan = iteration.plan
+    spec = plan.problem.trajectory
+    folder.mkdir(parents=True, exist_ok=True)
+    positions = np.array([c.light_position for c in iteration.captures])
+    directions = positions - plan.setup.sphere.center
+    directions = plan.scene.camera.to_camera_frame(directions / np.linalg.norm(directions, axis=1, keepdims=True))
+    write_captures(
+        folder / "captures.csv",
+        plan.trajectory,
+        settle_s=spec.settle_s,
+        image_pattern=spec.image_pattern,
+        light_directions_camera=directions,
+        light_positions=positions,
+        joint_names=plan.robot.joint_names,
+    )
+    names = [spec.image_pattern.format(index=i) for i in range(len(iteration.captures))]
+    for name, capture in zip(names, iteration.captures, strict=True):
+        write_capture_png(folder / name, capture.image, plan.problem.light.saturation)
+    (folder / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
+    return ["captures.csv", "lights.lp", *names]
+
+
+def acquire(
+    problem: Problem | Setup | str | Path,
+    camera: CaptureCamera | str = "model",
+    *,
+    images: str | Path | None = None,
+    progress: LoopProgress | None = None,
+) -> Acquisition:
+    """Run the camera in the loop on ``problem`` (module docstring) with ``camera`` (a
+    :class:`~optlight.capture.CaptureCamera` or one of :data:`CAMERAS`; ``images`` for "folder").
+
+    Raises :class:`VerificationError` for a plan that fails verification (the robot never runs it),
+    and what :func:`optlight.solve` and the cameras raise."""
+    notify: LoopProgress = progress or (lambda it, stage, done, total: None)
+    setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
+    device = make_camera(camera, setup, images) if isinstance(camera, str) else camera
+    spec = setup.problem.loop
+    model = setup
+    pool: list[Capture] = []
+    rounds: list[Iteration] = []
+    status, next_plan, best = "iteration limit", None, np.inf
+    for i in range(spec.iterations):
+        start = time.perf_counter()
+        try:
+            plan = solve(model, progress=_stage_progress(notify, i))
+        except OptlightError as e:
+            if i == 0:
+                raise
+            status = f"re-plan failed ({e})"
+            break
+        if not plan.verification.passed:
+            raise VerificationError(
+                f"iteration {i}: the plan failed verification; the robot does not run it\n{plan.verification.summary()}",
+                plan.verification,
+            )
+        notify(i, "capture", 0, len(plan.visited))
+        try:
+            captures = execute(plan, device)
+        except MissingCaptureError:
+            if i == 0:
+                raise
+            status, next_plan = "awaiting captures", plan
+            break
+        notify(i, "capture", len(captures), len(captures))
+        measured = measured_costs(setup, captures)
+        modelled = modelled_costs(model, [c.light_position for c in captures])
+        pool += captures
+        notify(i, "calibrate", 0, 1)
+        calibration, error = None, None
+        try:
+            calibration = calibrate(setup.scene, pool, spec)
+        except OptlightError as e:
+            error = str(e)
+        notify(i, "calibrate", 1, 1)
+        rounds.append(
+            Iteration(i, plan, tuple(captures), measured, modelled, calibration, time.perf_counter() - start, error)
+        )
+        cost = float(np.mean(measured))
+        if i > 0 and not cost < best * (1.0 - spec.tolerance):
+            status = "stopped improving"
+            break
+        best = min(best, cost)
+        if calibration is None:
+            status = "calibration failed"
+            break
+        model = calibrated_setup(setup, calibration, spec.normals)
+    exposure = dict(rounds[0].captures[0].exposure) if rounds and rounds[0].captures else {}
+    return Acquisition(setup, device.kind, tuple(rounds), status, next_plan, exposure)
+
+
+def _stage_progress(notify: LoopProgress, iteration: int) -> Callable[[str, int, int], None]:
+    """:func:`optlight.solve`'s progress as the loop's, for one iteration."""
+    return lambda stage, done, total: notify(iteration, f"plan: {stage}", done, total)
+
+
+# --------------------------------------------------------------------------------------------
+# The photometric servo
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class ServoResult:
+    """The photometric servo's trace: per capture the light ``positions`` (world, m), its ``zenith``
+    and ``azimuth`` (rad), the ``measured`` cost and whether the step was ``accepted``; ``final`` the
+    index of the best capture."""
+
+    positions: Array
+    zenith: Array
+    azimuth: Array
+    measured: Array
+    accepted: NDArray[np.bool_]
+
+    @property
+    def final(self) -> int:
+        return int(np.argmin(self.measured))
+
+
+def photometric_servo(
+    model: Setup,
+    camera: CaptureCamera,
+    zenith: float,
+    azimuth: float,
+    *,
+    measure: Setup | None = None,
+    steps: int | None = None,
+    step_deg: float | None = None,
+) -> ServoResult:
+    """Servo one light from (``zenith``, ``azimuth``) (rad) on the measured cost (module docstring).
+
+    ``model``: the calibrated setup whose differentiable model gives the image Jacobian; ``measure``:
+    the setup whose objective scores the recorded images (default ``model``: the same terms and
+    reference). ``steps`` captures (default ``[loop] servo_steps``), first step ``step_deg`` degrees
+    (default ``[loop] servo_step_deg``). The robot reaches each light by generalized IK from its last
+    configuration; a light it cannot reach counts as a rejected step."""
+    spec = model.problem.loop
+    steps = spec.servo_steps if steps is None else steps
+    step = np.deg2rad(spec.servo_step_deg if step_deg is None else step_deg)
+    scene, sphere, robot = model.scene, model.sphere, model.robot
+    judge = measure or model
+    index = judge.scene.gbuffer.pixel_index
+    gradient, jacobian = servo_functions(model)
+    lo, hi = sphere.zenith_min, sphere.zenith_max
+
+    def reach(z: float, a: float, start: Array | None) -> tuple[Array, Array] | None:
+        ik = generalized_ik(robot, sphere, (z, a), start, restarts=start is None, **model.ik)
+        return (ik.theta, robot.light_pose(ik.theta)[0]) if ik.success else None
+
+    first = reach(zenith, azimuth, None)
+    if first is None:
+        raise OptlightError(f"the robot cannot put the light at zenith {np.rad2deg(zenith):.1f}°, azimuth {np.rad2deg(azimuth):.1f}°")
+    q, position = first
+    capture = camera.capture(position, 0)
+    cost = judge.objective.numpy(capture.image.ravel()[index])
+    trace = [(position, zenith, azimuth, cost, True)]
+    z, a = zenith, azimuth
+    for k in range(1, steps):
+        g_image = np.asarray(gradient(capture.image.ravel()[index])).ravel()
+        jac = np.asarray(jacobian(z, a, scene.visibility(position)))
+        g = jac.T @ g_image  # dJ/dθ, dJ/dφ
+        d = -np.array([g[0], g[1] / max(np.sin(z) ** 2, 1e-6)])
+        norm = np.sqrt(d[0] ** 2 + (np.sin(z) * d[1]) ** 2)
+        if not norm > 0:
+            break
+        z_new = float(np.clip(z + step * d[0] / norm, lo, hi))
+        a_new = float(a + step * d[1] / norm)
+        reached = reach(z_new, a_new, q)
+        if reached is None:
+            trace.append((position, z_new, a_new, np.inf, False))
+            step /= 2
+            continue
+        new_capture = camera.capture(reached[1], k)
+        new_cost = judge.objective.numpy(new_capture.image.ravel()[index])
+        accepted = new_cost < cost
+        trace.append((reached[1], z_new, a_new, new_cost, accepted))
+        if accepted:
+            q, position, capture, cost, z, a = reached[0], reached[1], new_capture, new_cost, z_new, a_new
+        else:
+            step /= 2
+    positions, zen, azi, measured, accepted_flags = zip(*trace, strict=True)
+    return ServoResult(
+        np.array(positions), np.array(zen), np.array(azi), np.array(measured, float), np.array(accepted_flags)
+    )
+
+
+def servo_functions(model: Setup) -> tuple[ca.Function, ca.Function]:
+    """∇_I J (I ↦ P-vector) of the objective, and ∂I/∂(θ, φ) (θ, φ, v ↦ P×2) of the model's
+    differentiable luminance (smooth max and clip, the calibrated response)."""
+    scene, objective = model.scene, model.objective
+    pixels = ca.MX.sym("I", scene.gbuffer.size)
+    gradient = ca.Function("grad_J", [pixels], [ca.gradient(objective.casadi(pixels), pixels)])
+    zenith, azimuth = ca.MX.sym("zenith"), ca.MX.sym("azimuth")
+    v = ca.MX.sym("v", scene.gbuffer.size)
+    image = scene.luminance(smooth=True)(sphere_position(model.sphere, zenith, azimuth), v)
+    jacobian = ca.Function("dI_dangles", [zenith, azimuth, v], [ca.jacobian(image, ca.vertcat(zenith, azimuth))])
+    return gradient, jacobian

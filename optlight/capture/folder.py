@@ -1,0 +1,114 @@
+"""The folder camera: the images a real camera wrote, matched to the captures by ``captures.csv``.
+
+The folder holds a ``captures.csv`` (as :func:`optlight.export.write_captures` writes it, from
+``optlight solve`` or ``optlight acquire``) and the image files its ``image`` column names: PNG or
+TIFF, 8 or 16 bit, greyscale or RGB (converted to luma), of the camera's size. A capture with the
+light at a is the row whose ``light_position_*_m`` is nearest to a, within ``tolerance_m``; its file's
+values x ∈ [0, 1] (full scale 255 or 65535) are linearised by the given response,
+I = s·x^γ (γ = ``response_gamma``, 1 for a linear camera or a raw file), into the renderer's units.
+
+Every file is checked when the camera is made: a missing file, or one of another size than the
+camera's, is a one-line :class:`~optlight.errors.ProblemError` naming the file.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from PIL import Image, UnidentifiedImageError
+
+from optlight.capture import Capture, linearise
+from optlight.errors import OptlightError, ProblemError
+from optlight.objectives import read_image
+from optlight.scene import Camera
+
+#: The columns of captures.csv the folder camera reads.
+POSITION_COLUMNS = ("light_position_x_m", "light_position_y_m", "light_position_z_m")
+
+
+class MissingCaptureError(OptlightError):
+    """No image in the folder was taken with the light where the plan puts it (e.g. a re-planned
+    landmark the robot has not visited yet)."""
+
+
+class FolderCamera:
+    """Images of a real camera in ``folder`` (module docstring). ``camera``: the pinhole model, whose
+    size every image must have; ``saturation``: s, the renderer's value of a full-scale pixel."""
+
+    kind = "folder"
+
+    def __init__(
+        self,
+        folder: str | Path,
+        camera: Camera,
+        saturation: float = 1.0,
+        response_gamma: float = 1.0,
+        tolerance_m: float = 1e-3,
+    ) -> None:
+        self.folder = Path(folder)
+        self.camera = camera
+        self.saturation = float(saturation)
+        self.response_gamma = float(response_gamma)
+        self.tolerance_m = float(tolerance_m)
+        self.csv = self.folder / "captures.csv"
+        self.names, self.positions = read_captures_csv(self.csv)
+        for row, name in enumerate(self.names):
+            self._check_file(row, name)
+
+    def _check_file(self, row: int, name: str) -> Path:
+        path = self.folder / name
+        if not path.is_file():
+            raise ProblemError(str(path), "", f"the image file row {row} of {self.csv.name} names", "no such file")
+        try:
+            with Image.open(path) as im:
+                size = im.size
+        except (OSError, UnidentifiedImageError) as e:
+            raise ProblemError(str(path), "", "a PNG or TIFF image", str(e)) from None
+        expected = (self.camera.width, self.camera.height)
+        if size != expected:
+            raise ProblemError(
+                str(path), "", f"an image of the camera's size {expected[0]}×{expected[1]} px", f"{size[0]}×{size[1]} px"
+            )
+        return path
+
+    def capture(self, light_position: ArrayLike, index: int = 0) -> Capture:
+        """The image of the row nearest to ``light_position``, linearised; :class:`MissingCaptureError`
+        when no row is within ``tolerance_m``."""
+        a = np.asarray(light_position, float)
+        distance = np.linalg.norm(self.positions - a, axis=1) if len(self.positions) else np.array([np.inf])
+        row = int(np.argmin(distance))
+        if not distance[row] <= self.tolerance_m:
+            nearest = f"nearest {1e3 * distance[row]:.1f} mm away" if np.isfinite(distance[row]) else "no rows"
+            raise MissingCaptureError(
+                f"{self.csv}: no image of capture {index} (light at {np.round(a, 4).tolist()} m; {nearest})"
+            )
+        path = self._check_file(row, self.names[row])
+        recorded = read_image(path, 1.0, str(path), "")
+        exposure = {
+            "camera": self.kind,
+            "file": self.names[row],
+            "saturation": self.saturation,
+            "linearised_gamma": self.response_gamma,
+        }
+        return Capture(linearise(recorded * self.saturation, self.saturation, self.response_gamma), a, index, exposure)
+
+
+def read_captures_csv(path: Path) -> tuple[list[str], NDArray[np.float64]]:
+    """The image names and light positions (N, 3, m) of a captures.csv; errors name the file."""
+    if not path.is_file():
+        raise ProblemError(str(path), "", "a captures.csv (as optlight solve or acquire writes it)", "no such file")
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    columns = ("image", *POSITION_COLUMNS)
+    if rows:
+        missing = [c for c in columns if c not in rows[0]]
+        if missing:
+            raise ProblemError(str(path), missing[0], "the columns " + ", ".join(columns), "missing")
+    try:
+        positions = np.array([[float(r[c]) for c in POSITION_COLUMNS] for r in rows], float).reshape(-1, 3)
+    except (TypeError, ValueError) as e:
+        raise ProblemError(str(path), "light_position_*_m", "numbers", str(e)) from None
+    return [r["image"] for r in rows], positions
