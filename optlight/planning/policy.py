@@ -188,7 +188,28 @@ def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reache
         notes.append(f"dropped {where}")
     if not kept:
         raise UnreachableError(f"no landmark is reachable by {robot.name}")
-    return LandmarkPlacement(tuple(kept), np.array(thetas), tuple(notes))
+    return LandmarkPlacement(tuple(kept), _follow_back(reacher, kept, np.array(thetas)), tuple(notes))
+
+
+#: A posture further than this (rad, largest joint) from the next landmark's is searched again from it.
+REJOIN_STEP = 1.0
+
+
+def _follow_back(reacher: Reacher, landmarks: Sequence[Landmark], thetas: Array) -> Array:
+    """The chain's backward pass: the first landmarks were placed before the chain had a posture to
+    follow (from θ_ref, maybe on another branch). Walking back from the last, a landmark whose
+    angles are more than :data:`REJOIN_STEP` from the next one's is reached again from the next one's
+    angles (no restarts); the new clear angles replace the old when they are nearer the next's. A
+    landmark the placement NLP put (status "placed") keeps its angles: they are that NLP's optimum."""
+    thetas = thetas.copy()
+    for i in range(len(landmarks) - 2, -1, -1):
+        gap = np.abs(thetas[i] - thetas[i + 1]).max()
+        if gap <= REJOIN_STEP or landmarks[i].status == "placed":
+            continue
+        again = reacher.attempt(landmarks[i].position, thetas[i + 1], restarts=False).theta
+        if again is not None and np.abs(again - thetas[i + 1]).max() < gap:
+            thetas[i] = again
+    return thetas
 
 
 def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int64]:
