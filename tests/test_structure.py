@@ -141,6 +141,14 @@ def test_no_module_imports_another_modules_private_names() -> None:
     assert not private, private
 
 
+def test_the_trajectory_type_does_not_import_toppra() -> None:
+    """verify, export and the figures need the Trajectory type, not the TOPPRA timing (a fresh
+    interpreter: this one has imported toppra already)."""
+    code = "import sys, optlight.verify, optlight.export, optlight.viz.figures; print('toppra' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
+
+
 def test_public_api_is_one_list() -> None:
     """``__all__`` holds every public name once; the lazy names are the ``TYPE_CHECKING`` imports of
     ``optlight/__init__.py``, and every name resolves to what its module defines."""

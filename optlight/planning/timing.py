@@ -38,14 +38,13 @@ import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-import toppra
-import toppra.algorithm
-import toppra.constraint
 from numpy.typing import ArrayLike, NDArray
-from toppra.interpolator import propose_gridpoints
+
+if TYPE_CHECKING:
+    import toppra
 
 from optlight.errors import SolverError
 
@@ -70,7 +69,7 @@ TIME_RESOLUTION = 1e-6
 _PROBE_FRACTIONS = np.arange(1, 8) / 8
 
 # toppra logs a warning for every failure we turn into a SolverError, and INFO for every success.
-logging.getLogger("toppra").setLevel(logging.ERROR)
+logging.getLogger("toppra").setLevel(logging.ERROR)  # set before toppra is imported, kept after
 
 
 # --------------------------------------------------------------------------------------------
@@ -639,6 +638,12 @@ def _time_segment(
 ) -> _Motion | None:
     """TOPPRA on one segment, rest to rest, with the grid refined until the limits hold between
     gridpoints (module docstring); None for a segment without motion."""
+    # imported here: the Trajectory type (verify, export, viz) does not need TOPPRA
+    import toppra
+    import toppra.algorithm
+    import toppra.constraint
+    from toppra.interpolator import propose_gridpoints
+
     chord = chord_path(waypoints)
     if chord is None:
         return None

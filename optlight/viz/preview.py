@@ -319,7 +319,8 @@ class Preview:
         vis[LIGHT_NODE].set_transform(self.light_pose.homogeneous)
 
     def _set_view(self, vis: meshcat.Visualizer, points: Array) -> None:
-        """Frame the scene in meshcat's orbiting camera, seen from the camera's side and above.
+        """Frame the scene in meshcat's orbiting camera, seen from the camera's side (the side away
+        from the robot's base) and above.
 
         meshcat 0.3.2's camera always looks at (and orbits) the viewer's origin, and has no command
         to move that target; so the scene, grid and axes are shifted by −c instead, c the centre of
@@ -337,6 +338,9 @@ class Preview:
         horizontal = float(np.linalg.norm(toward_camera))
         toward_camera = toward_camera / horizontal if horizontal > 1e-9 else np.array([1.0, 0.0, 0.0])
         side = np.cross([0.0, 0.0, 1.0], toward_camera)
+        # from the side away from the robot's base, so that the arm does not hide the object
+        if (self.robot.base_placement.translation - sphere.center) @ side > 0.0:
+            side = -side
         direction = toward_camera + 0.8 * side + np.array([0.0, 0.0, 0.6])
         offset = 0.7 * max(extent, 0.5) * direction / np.linalg.norm(direction)
         # The camera node is y-up (three.js): world (x, y, z) is (x, z, −y) there.
