@@ -6,6 +6,7 @@ import csv
 
 import numpy as np
 import pytest
+import toppra.algorithm
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -206,14 +207,14 @@ def test_bad_inputs_are_rejected_with_context() -> None:
 
 
 def test_toppra_failure_raises_solver_error_naming_the_segment(monkeypatch) -> None:
-    real = timing.toppra.algorithm.TOPPRA.compute_trajectory
+    real = toppra.algorithm.TOPPRA.compute_trajectory
     calls = {"n": 0}
 
     def fail_on_second(self, sd_start=0, sd_end=0):  # noqa: ANN001, ANN202 - toppra's signature
         calls["n"] += 1
         return None if calls["n"] == 2 else real(self, sd_start, sd_end)
 
-    monkeypatch.setattr(timing.toppra.algorithm.TOPPRA, "compute_trajectory", fail_on_second)
+    monkeypatch.setattr(toppra.algorithm.TOPPRA, "compute_trajectory", fail_on_second)
     with pytest.raises(SolverError, match="segment 1: TOPPRA failed"):
         time_parameterize(_segments(LANDMARKS), VMAX, AMAX, 0.1)
 
