@@ -62,7 +62,6 @@ import os
 import re
 import tempfile
 import time
-import tomllib
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -74,7 +73,7 @@ from optlight.errors import OptlightError, ProblemError, UsageError
 from optlight.export import MANIFEST, check_output_folder, write_folder
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
-from optlight.spec import Problem, load_problem, problem_from_dict, resolve_problem_path
+from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -140,14 +139,7 @@ class BatchSpec:
 def load_batch_spec(path: str | Path) -> BatchSpec:
     """Read and validate a batch spec file (see the module docstring)."""
     path = Path(path).expanduser()
-    try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as e:
-        raise ProblemError(str(path), "", f"valid TOML ({e})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ProblemError(str(path), "", f"a readable TOML file ({e})") from None
-    return batch_spec_from_dict(data, source=path.resolve())
+    return batch_spec_from_dict(read_toml(path), source=path.resolve())
 
 
 def batch_spec_from_dict(data: Mapping[str, Any], source: Path | None = None) -> BatchSpec:

@@ -56,7 +56,6 @@ import json
 import math
 import re
 import time
-import tomllib
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -84,7 +83,7 @@ from optlight.jsondata import json_safe
 from optlight.planning.landmarks import find_landmarks
 from optlight.planning.policy import Reacher
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, read_toml
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -152,14 +151,7 @@ class CellSpec:
 def load_cell_spec(path: str | Path) -> CellSpec:
     """Read and validate a cell spec file (see the module docstring)."""
     path = Path(path).expanduser()
-    try:
-        with path.open("rb") as f:
-            data = tomllib.load(f)
-    except tomllib.TOMLDecodeError as e:
-        raise ProblemError(str(path), "", f"valid TOML ({e})") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ProblemError(str(path), "", f"a readable TOML file ({e})") from None
-    return cell_spec_from_dict(data, source=path.resolve())
+    return cell_spec_from_dict(read_toml(path), source=path.resolve())
 
 
 def cell_spec_from_dict(data: Mapping[str, Any], source: Path | None = None) -> CellSpec:

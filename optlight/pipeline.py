@@ -27,6 +27,7 @@ import time
 import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import distinct_landmarks, find_landmarks
 from optlight.planning.path import build_path
 from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
-from optlight.planning.timing import time_parameterize
+from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import optimize_knots, plan_transfer
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -111,27 +112,12 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]  # one landmark: its dwell
         limits, spec = setup.limits, setup.trajectory_spec
         jerk_limited = spec.timing == "jerk_limited"
-        if jerk_limited:
-            trajectory = jerk_limited_timing(
-                segments,
-                limits.velocity,
-                limits.acceleration,
-                limits.jerk,
-                spec.dwell_s,
-                joint_names=robot.joint_names,
-                approach=approach,
-                retreat=retreat,
-            )
-        else:
-            trajectory = time_parameterize(
-                segments,
-                limits.velocity,
-                limits.acceleration,
-                spec.dwell_s,
-                joint_names=robot.joint_names,
-                approach=approach,
-                retreat=retreat,
-            )
+        timed: Callable[..., Trajectory] = (
+            partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
+            if jerk_limited
+            else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
+        )
+        trajectory = timed(spec.dwell_s, joint_names=robot.joint_names, approach=approach, retreat=retreat)
 
     with stage("verify"):
         environment = setup.environment

@@ -754,17 +754,22 @@ def resolve_problem_path(name_or_path: str | Path) -> Path:
     raise ProblemError(str(name_or_path), "", f"an existing file or a built-in problem ({names})")
 
 
-def load_problem(name_or_path: str | Path) -> Problem:
-    """Read and validate a problem file (a path or a built-in name) into a :class:`Problem`."""
-    path = resolve_problem_path(name_or_path)
+def read_toml(path: Path) -> dict[str, Any]:
+    """The parsed TOML file at ``path``; a :class:`ProblemError` naming the file when it cannot be
+    read or parsed (problem files, batch and cell specs)."""
     try:
         with path.open("rb") as f:
-            data = tomllib.load(f)
+            return tomllib.load(f)
     except tomllib.TOMLDecodeError as e:
         raise ProblemError(str(path), "", f"valid TOML ({e})") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ProblemError(str(path), "", f"a readable TOML file ({e})") from None
-    return problem_from_dict(data, source=path)
+
+
+def load_problem(name_or_path: str | Path) -> Problem:
+    """Read and validate a problem file (a path or a built-in name) into a :class:`Problem`."""
+    path = resolve_problem_path(name_or_path)
+    return problem_from_dict(read_toml(path), source=path)
 
 
 def problem_from_dict(data: dict[str, Any], source: Path | None = None) -> Problem:
