@@ -134,7 +134,7 @@ def run(problems: Sequence[str] = PROBLEMS, repeats: int = 3) -> dict[str, Any]:
         results[problem.name] = {
             "robot": problem.robot.name,
             "landmarks": problem.landmarks.count,
-            "view_cone": problem.environment.view_cone,
+            "view": problem.view.mode,
             "margin_m": environment.margin,
             "self_margin_m": environment.self_margin,
             **{plan: _summary(runs[plan]) for plan in PLANS},

@@ -79,7 +79,7 @@ def plot_landmarks_polar(
             "*",
             color="tab:orange",
             ms=8,
-            label="fixed zenith",
+            label=f"the paper's fixed zenith ({math.degrees(fixed_zenith):.0f}°)",
         )
     order = np.argsort(az) if landmarks.mode == "azimuth" else np.arange(len(az))
     if landmarks.mode == "azimuth":
