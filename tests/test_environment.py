@@ -291,7 +291,7 @@ def test_environment_is_off_by_default_and_on_in_the_obstacle_problems() -> None
     names = {o.name for o in Environment.from_problem(load_problem("table_wall")).obstacles}
     assert names == {"object", "table", "camera_body", "camera_stand", "wall"}
     collision = load_problem("collision")
-    assert collision.environment.enabled and collision.view.mode == "off"
+    assert collision.environment.enabled and collision.view.mode == "capture"
 
 
 @pytest.mark.parametrize(
