@@ -8,8 +8,9 @@ import math
 
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import REACH_ONLY, reduced_problem
 
+import optlight
 from optlight.errors import ProblemError
 from optlight.planning.landmarks import Landmark, distinct_landmarks, find_landmarks
 from optlight.setup import Setup, housing_clearance, housing_sphere_clearance
@@ -108,8 +109,6 @@ def test_the_default_plan_starts_and_ends_at_the_start_and_keeps_the_view_clear(
     """The whole default job at a small size: the trajectory leaves from and returns to [robot] start,
     and the verification's exact ray cast (robot meshes + housing, placed by pinocchio) finds the view
     and the beam clear at every capture."""
-    import optlight
-
     problem = reduced_problem(camera_px=48, landmarks={"count": 12, "resolution": 32})
     plan = optlight.solve(problem)
     start = plan.setup.start
@@ -122,3 +121,13 @@ def test_the_default_plan_starts_and_ends_at_the_start_and_keeps_the_view_clear(
     assert report.checks["view"].passed and report.checks["beam"].passed
     zeniths = [lm.zenith for lm in plan.visited]
     assert min(zeniths) >= plan.setup.view_zenith - 1e-9
+
+
+def test_a_plan_without_view_protection_says_so_first(tmp_path) -> None:
+    """[view] mode = "off": the view and beam checks are skipped, and report.md says so before
+    anything else; protected, its first lines say how."""
+    plan = optlight.solve(reduced_problem(camera_px=32, landmarks={"count": 2, "resolution": 32}, **REACH_ONLY))
+    assert {"view", "beam"} <= set(plan.verification.skipped)
+    plan.save(tmp_path / "off", preview=False)
+    head = (tmp_path / "off" / "report.md").read_text().splitlines()[:4]
+    assert any("The camera's view is not protected" in line for line in head)
