@@ -211,6 +211,7 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
         "objective": 2,
         "environment": 1,
         "clearance graph": 1,
+        "view graph": 1,
         "collision model": 1,
     }, counts
 
