@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from optlight.objectives import Objective
 from optlight.planning.landmarks import CostGrid, Progress, sweep_costs, zenith_grid
 from optlight.scene import Scene
+from optlight.geometry import LightSphere
 from optlight.spec import Problem
 
 Array = NDArray[np.float64]
@@ -41,13 +42,16 @@ def paper_sweep(
     step_deg: float = 0.5,
     objective: Objective | None = None,
     progress: Progress | None = None,
+    sphere: LightSphere | None = None,
 ) -> SweepResult:
     """The paper's fine zenith sweep along ``landmarks.count`` azimuths φ_j = 2πj/M, every sample
     rendered at ``scene``'s resolution (default: the camera's) with shadow rays. ``objective``
-    defaults to the problem's, built on ``scene``."""
+    defaults to the problem's, built on ``scene``; ``sphere`` is the zenith range swept (default
+    ``scene``'s cap; pass ``Setup.sphere`` to sweep only the lights clear of the camera's view, the
+    domain our search uses)."""
     scene = scene if scene is not None else Scene.from_problem(problem)
     objective = objective if objective is not None else Objective.from_problem(problem, scene)
-    zenith = zenith_grid(scene.sphere, math.radians(step_deg))
+    zenith = zenith_grid(sphere if sphere is not None else scene.sphere, math.radians(step_deg))
     count = problem.landmarks.count
     azimuth = 2 * np.pi * np.arange(count) / count
     costs = np.empty((count, zenith.size))

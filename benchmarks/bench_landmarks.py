@@ -3,8 +3,9 @@
 Ours: :func:`optlight.planning.landmarks.find_landmarks` (coarse sweep at the search resolution,
 IPOPT refinement of the best seeds, polish at the camera's resolution). Baseline:
 :func:`baselines.paper_sweep`, the zenith swept in 0.5° steps along each azimuth at the camera's
-resolution with shadow rays at every sample. Both costs per azimuth are evaluated by the same
-function (:func:`optlight.planning.landmarks.exact_cost`, camera resolution, shadow rays), so equal
+resolution with shadow rays at every sample, over the same lights as ours (the cap less the
+lights whose housing would enter the camera's view, ``Setup.sphere``). Both costs per azimuth are
+evaluated by the same function (:func:`optlight.planning.landmarks.exact_cost`, camera resolution, shadow rays), so equal
 zeniths give bit-identical costs.
 
 Reported: the worst per-azimuth cost ratio ours/sweep (azimuths where the sweep reaches 0 are
@@ -57,7 +58,7 @@ def run(problem: str = "default") -> dict[str, Any]:
     ours_time = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    sweep = paper_sweep(spec, scene, SWEEP_STEP_DEG)
+    sweep = paper_sweep(spec, scene, SWEEP_STEP_DEG, objective, sphere=setup.sphere)
     sweep_time = time.perf_counter() - t0
 
     rows = []
