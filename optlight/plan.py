@@ -37,7 +37,9 @@ class Plan:
     in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
     ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
     knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
-    seconds per stage and ``total``; ``warnings`` what was dropped or degraded.
+    seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
+    set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
+    None without ``[lightset]``.
     """
 
     setup: Setup
@@ -51,6 +53,7 @@ class Plan:
     verification: VerificationReport
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
+    lightset: dict[str, Any] | None = None
 
     @property
     def problem(self) -> Problem:
@@ -108,6 +111,7 @@ class Plan:
                 if name in ("clearance", "self_collision", "view_cone")
             },
             "timings_s": dict(self.timings),
+            **({"lightset": self.lightset} if self.lightset is not None else {}),
         }
 
     def preview(self) -> Preview:

@@ -161,11 +161,44 @@ def report_markdown(
         "```",
         "",
     ]
+    if "lightset" in s:
+        lines += _lightset_lines(s["lightset"])
     if warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
+
+
+def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
+    """report.md's section on a light set: requested vs achieved lights, set cost, capture order."""
+    travel = lightset["order_joint_travel_rad"]
+    lines = [
+        "## Light set",
+        "",
+        "| quantity | value |",
+        "|---|---|",
+        f"| kind | {lightset['kind']} |",
+        f"| lights requested / achieved | {lightset['requested']} / {lightset['achieved']} |",
+        f"| moved by the placement | {len(lightset['moved_by_placement'])} |",
+        f"| dropped | {len(lightset['dropped'])} |",
+    ]
+    if "grid" in lightset:
+        grid = lightset["grid"]
+        lines.append(
+            f"| grid lights replaced on the allowed cap | {len(grid['replaced'])} (up to {grid['max_moved_deg']:.1f}°) |"
+        )
+    if "set_cost_requested" in lightset:
+        lines.append(
+            f"| set cost requested → achieved | {lightset['set_cost_requested']:.4g} → "
+            f"{lightset['set_cost_achieved']:.4g} |"
+        )
+    lines += [
+        f"| joint travel, tour / azimuth order | {travel['tour']:.2f} rad / {travel['azimuth']:.2f} rad |",
+        f"| design time | {lightset['design_time_s']:.2f} s |",
+        "",
+    ]
+    return lines
 
 
 def save_results(
@@ -242,7 +275,7 @@ def save_results(
         ]
 
     writers = [
-        landmark_figures,
+        *([landmark_figures] if landmarks.mode != "set" else []),  # a set has no sweep or reference
         joint_trajectory,
         captures,
         *([preview_html] if preview is not None else []),
