@@ -90,7 +90,11 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design and setup.trajectory_spec.order == "tour" else visiting_order(setup, placement)
+        order = (
+            tour_order(placement.thetas)
+            if design and setup.trajectory_spec.order == "tour"
+            else visiting_order(setup, placement)
+        )
         visited = tuple(placement.landmarks[i] for i in order)
         positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
@@ -104,9 +108,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
             min_intervals=np.ceil(2.0 * reconfiguration / setup.trajectory_spec.max_step_rad).astype(int) + 1,
         )
         warm, failures = knot_ik(setup, path, landmark_thetas)
-    lightset = (
-        set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
-    )
+    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures:
         notes.append(f"per-knot IK did not converge at {failures} of {path.n_knots} knots (NLP warm start)")
 

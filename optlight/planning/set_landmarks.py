@@ -182,7 +182,9 @@ def set_summary(
         "achieved": len(placed),
         "dropped": sorted(set(range(len(design.requested))) - {lm.index for lm in placed}),
         "moved_by_placement": [
-            {"index": lm.index, "moved_deg": float(m)} for lm, m in zip(placed, moved, strict=True) if m > 1e-6
+            {"index": lm.index, "moved_deg": float(m)}
+            for lm, m in zip(placed, moved, strict=True)
+            if m > 1e-6
         ],
         "design_time_s": design.time_s,
         "order_joint_travel_rad": {
