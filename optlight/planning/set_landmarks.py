@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
@@ -160,7 +160,7 @@ def tour_order(thetas: Array) -> NDArray[np.int64]:
     return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
 
 
-def joint_distance(thetas: Array, order: Sequence[int]) -> float:
+def joint_distance(thetas: Array, order: ArrayLike) -> float:
     """Σ |θ_{k+1} − θ_k|_∞ (rad) along ``order``: the largest joint's travel, a proxy of the motion time
     between captures at equal joint speed limits."""
     steps = np.diff(thetas[np.asarray(order)], axis=0)
@@ -168,7 +168,7 @@ def joint_distance(thetas: Array, order: Sequence[int]) -> float:
 
 
 def set_summary(
-    setup: Setup, design: SetDesign, placed: Sequence[Landmark], thetas: Array, order: Sequence[int]
+    setup: Setup, design: SetDesign, placed: Sequence[Landmark], thetas: Array, order: ArrayLike
 ) -> dict[str, Any]:
     """Requested vs achieved, JSON-safe: counts, per-light move (deg) from the requested direction
     (placed lights by index), the set cost at the requested and the achieved directions (designed
