@@ -90,11 +90,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = (
-            tour_order(placement.thetas)
-            if design and setup.trajectory_spec.order == "tour"
-            else visiting_order(setup, placement)
-        )
+        order = tour_order(placement.thetas) if design else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
         positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]

@@ -118,7 +118,7 @@ def report_markdown(
     s, t = summary, timings
     view = setup.problem.view
     protected = (
-        '> **The camera\'s view is not protected** (`[view] mode = "off"`): robot links or the lamp may '
+        "> **The camera's view is not protected** (`[view] mode = \"off\"`): robot links or the lamp may "
         "stand between the camera and the object in these images."
         if view.mode == "off"
         else f"The camera's view of the object is kept clear of the robot and the lamp "
