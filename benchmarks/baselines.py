@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from optlight.geometry import LightSphere
 from optlight.objectives import Objective
 from optlight.planning.landmarks import CostGrid, Progress, sweep_costs, zenith_grid
 from optlight.scene import Scene
-from optlight.geometry import LightSphere
 from optlight.spec import Problem
 
 Array = NDArray[np.float64]

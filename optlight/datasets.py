@@ -26,6 +26,7 @@ import io
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +34,19 @@ from PIL import Image
 
 from optlight.errors import OptlightError
 from optlight.export import lp_direction
+from optlight.photometric_stereo import (
+    error_map_figure,
+    gbuffer_normal_map,
+    normal_map_figure,
+    recover_from_scene,
+    recovery_report,
+    render_set,
+)
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from optlight.scene import Scene
 
 Array = NDArray[np.float64]
 Files = dict[str, bytes]
@@ -193,3 +207,47 @@ def _read_image(path: Path) -> Array:
         if im.mode in ("RGB", "RGBA"):
             return np.asarray(im)[..., :3].astype(float) @ np.array([0.2126, 0.7152, 0.0722]) / 255.0
         return np.asarray(im.convert("L")).astype(float) / 255.0
+
+
+@dataclass(frozen=True, eq=False)
+class ModelCapture:
+    """A light set captured by the model camera: the DiLiGenT folder's files and the recovered
+    normals and albedo (``files``, names relative to the folder), the figures ``normal_map`` and
+    ``normal_error``, and the recovery's error statistics against the G-buffer normals (``stats``,
+    :func:`~optlight.photometric_stereo.recovery_report`)."""
+
+    files: Files
+    figures: dict[str, Figure]
+    stats: dict[str, Any]
+
+
+def model_capture(
+    scene: Scene, directions: ArrayLike, dark_level: float = 0.02, saturation_level: float = 0.98
+) -> ModelCapture:
+    """Render the lights at sphere-frame ``directions`` (N, 3) with the NumPy renderer (shadow rays),
+    recover the normals from those images (:func:`~optlight.photometric_stereo.recover_from_scene`,
+    the directional model) and package both in the DiLiGenT layout (x right, y up, z towards the
+    camera): the images, light directions and intensities (``gain · power``), the mask, and
+    ``normals.npy`` / ``albedo.npy``."""
+    d = np.asarray(directions, float)
+    images = render_set(scene, d)
+    recovery = recover_from_scene(scene, d, images, dark_level, saturation_level)
+    camera, light = scene.camera, scene.light
+    to_camera = camera.to_camera_frame
+    normals_camera = to_camera(recovery.normals.reshape(-1, 3)).reshape(recovery.normals.shape)
+    files = {
+        **diligent_files(
+            images,
+            to_camera(d @ scene.sphere.rotation.T),
+            np.full(len(d), light.gain * light.power),
+            scene.gbuffer.mask,
+            saturation=light.saturation,
+        ),
+        **recovery_files(normals_camera, recovery.albedo, recovery.valid),
+    }
+    error = recovery.angular_error(gbuffer_normal_map(scene))
+    figures = {
+        "normal_map": normal_map_figure(diligent_axes(normals_camera), recovery.valid, "recovered normals"),
+        "normal_error": error_map_figure(error, "angular error vs the model's normals"),
+    }
+    return ModelCapture(files, figures, recovery_report(recovery, gbuffer_normal_map(scene)))

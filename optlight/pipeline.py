@@ -5,8 +5,10 @@ A straight line of stages, each taking built objects and returning a typed resul
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once;
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
-   on the lights whose housing stays out of the camera's view; landmarks closer than ``[landmarks]
-   distinct_deg`` are one capture (:func:`~optlight.planning.landmarks.distinct_landmarks`);
+   on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
+   designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-
+   space tour); landmarks closer than ``[landmarks] distinct_deg`` are one capture
+   (:func:`~optlight.planning.landmarks.distinct_landmarks`);
 3. ``placement``: joint angles at every landmark (:func:`~optlight.planning.policy.place_landmarks`:
    IK, a clear posture, or the joint-space placement NLP, which moves a landmark along its azimuth);
 4. ``path``: visiting order, great-circle knots, and per-knot IK along the path (the paper's
@@ -38,6 +40,7 @@ from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import distinct_landmarks, find_landmarks
 from optlight.planning.path import build_path
 from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
+from optlight.planning.set_landmarks import landmarks_of_set, set_summary, tour_order
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import optimize_knots, plan_transfer
 from optlight.setup import Setup
@@ -75,7 +78,11 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     robot, sphere = setup.robot, setup.sphere
 
     start = time.perf_counter()
-    landmarks = find_landmarks(setup, progress=lambda d, t: notify("landmarks", d, t))
+    design = None
+    if setup.problem.lightset.kind != "none":  # a light set instead of the per-azimuth search
+        landmarks, design = landmarks_of_set(setup)
+    else:
+        landmarks = find_landmarks(setup, progress=lambda d, t: notify("landmarks", d, t))
     captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
     timings["landmarks"] = time.perf_counter() - start
 
@@ -84,7 +91,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = visiting_order(setup, placement)
+        order = tour_order(placement.thetas) if design else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
         positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
@@ -98,6 +105,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
             min_intervals=np.ceil(2.0 * reconfiguration / setup.trajectory_spec.max_step_rad).astype(int) + 1,
         )
         warm, failures = knot_ik(setup, path, landmark_thetas)
+    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures:
         notes.append(f"per-knot IK did not converge at {failures} of {path.n_knots} knots (NLP warm start)")
 
@@ -159,4 +167,5 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         verification=report,
         timings=timings,
         warnings=tuple(notes),
+        lightset=lightset,
     )

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
@@ -28,6 +29,9 @@ from optlight.viz.preview import Preview
 
 Array = NDArray[np.float64]
 
+#: Subfolder of the results folder with a light set's model images in the DiLiGenT layout.
+PHOTOMETRIC_STEREO_FOLDER = "photometric_stereo"
+
 
 @dataclass(frozen=True)
 class Plan:
@@ -37,7 +41,9 @@ class Plan:
     in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
     ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
     knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
-    seconds per stage and ``total``; ``warnings`` what was dropped or degraded.
+    seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
+    set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
+    None without ``[lightset]``.
     """
 
     setup: Setup
@@ -51,6 +57,7 @@ class Plan:
     verification: VerificationReport
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
+    lightset: dict[str, Any] | None = None
 
     @property
     def problem(self) -> Problem:
@@ -108,6 +115,7 @@ class Plan:
                 if name in ("clearance", "self_collision", "view_cone")
             },
             "timings_s": dict(self.timings),
+            **({"lightset": self.lightset} if self.lightset is not None else {}),
         }
 
     def preview(self) -> Preview:
@@ -127,6 +135,12 @@ class Plan:
         """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
         plan failed verification. ``folder`` must be new, empty or, with ``overwrite``, an earlier
         optlight output (the output policy of :mod:`optlight.export`). Returns the paths written."""
+        summary, figures, writers = self.summary(), {}, []
+        if self.lightset is not None:
+            capture = self.model_capture()
+            summary["lightset"] = {**self.lightset, "recovery": capture.stats}
+            figures = capture.figures
+            writers = [files_writer(capture.files, PHOTOMETRIC_STEREO_FOLDER)]
         return save_results(
             folder,
             setup=self.setup,
@@ -137,13 +151,24 @@ class Plan:
             nlp=self.nlp,
             trajectory=self.trajectory,
             verification=self.verification,
-            summary=self.summary(),
+            summary=summary,
             timings=self.timings,
             warnings=self.warnings,
             light_directions_camera=self.light_directions_camera,
             preview=(lambda path: self.preview().save_html(path)) if preview else None,
             overwrite=overwrite,
+            extra_figures=figures,
+            extra_writers=writers,
         )
+
+    def model_capture(self) -> ModelCapture:
+        """The visited lights captured by the model camera, normals recovered, in the DiLiGenT
+        layout (:func:`optlight.datasets.model_capture`; ``[lightset]`` dark and saturation levels)."""
+        spec = self.problem.lightset
+        sphere = self.setup.sphere
+        d = (np.array([lm.position for lm in self.visited]) - sphere.center) @ sphere.rotation
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return model_capture(self.scene, d, spec.dark_level, spec.saturation_level)
 
 
 def joint_path_length(theta: Array) -> float:

@@ -9,7 +9,9 @@ at once or not at all (:func:`optlight.export.write_results`):
   directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
-- ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers).
+- ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers);
+- for a light set, what :class:`~optlight.plan.Plan` adds: ``photometric_stereo/`` (the DiLiGenT
+  layout, :func:`optlight.datasets.model_capture`), ``normal_map.png`` and ``normal_error.png``.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +33,9 @@ from optlight.setup import Setup
 from optlight.verify import VerificationReport
 from optlight.viz.figures import save_landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 Array = NDArray[np.float64]
 
@@ -161,11 +166,50 @@ def report_markdown(
         "```",
         "",
     ]
+    if "lightset" in s:
+        lines += _lightset_lines(s["lightset"])
     if warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
+
+
+def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
+    """report.md's section on a light set: requested vs achieved lights, set cost, capture order."""
+    travel = lightset["order_joint_travel_rad"]
+    lines = [
+        "## Light set",
+        "",
+        "| quantity | value |",
+        "|---|---|",
+        f"| kind | {lightset['kind']} |",
+        f"| lights requested / achieved | {lightset['requested']} / {lightset['achieved']} |",
+        f"| moved by the placement | {len(lightset['moved_by_placement'])} |",
+        f"| dropped | {len(lightset['dropped'])} |",
+    ]
+    if "grid" in lightset:
+        grid = lightset["grid"]
+        lines.append(
+            f"| grid lights replaced on the allowed cap | {len(grid['replaced'])} (up to {grid['max_moved_deg']:.1f}°) |"
+        )
+    if "set_cost_requested" in lightset:
+        lines.append(
+            f"| set cost requested → achieved | {lightset['set_cost_requested']:.4g} → "
+            f"{lightset['set_cost_achieved']:.4g} |"
+        )
+    if "recovery" in lightset:
+        r = lightset["recovery"]
+        lines.append(
+            f"| normals recovered from the model's images (`photometric_stereo/`) | {r['recovered_pct']:.1f} % "
+            f"of the object, angular error mean {r['mean_deg']:.2f}°, p95 {r['p95_deg']:.2f}° |"
+        )
+    lines += [
+        f"| joint travel, tour / azimuth order | {travel['tour']:.2f} rad / {travel['azimuth']:.2f} rad |",
+        f"| design time | {lightset['design_time_s']:.2f} s |",
+        "",
+    ]
+    return lines
 
 
 def save_results(
@@ -185,9 +229,12 @@ def save_results(
     light_directions_camera: Array,
     preview: Callable[[Path], Path] | None = None,
     overwrite: bool = False,
+    extra_figures: Mapping[str, Figure] | None = None,
+    extra_writers: Sequence[Callable[[Path], list[Path]]] = (),
 ) -> list[Path]:
     """Write the results folder of a verified plan (see the module docstring); returns the paths.
-    ``preview(path)`` writes ``preview.html`` (left out when None).
+    ``preview(path)`` writes ``preview.html`` (left out when None); ``extra_figures`` and
+    ``extra_writers`` add figures and files (a light set's photometric-stereo folder).
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
@@ -207,6 +254,7 @@ def save_results(
             np.array([robot.light_pose(q)[0] for q in timed]),
             np.array([lm.position for lm in visited]),
         ),
+        **(extra_figures or {}),
     }
 
     def landmark_figures(folder: Path) -> list[Path]:
@@ -242,10 +290,11 @@ def save_results(
         ]
 
     writers = [
-        landmark_figures,
+        *([landmark_figures] if landmarks.mode != "set" else []),  # a set has no sweep or reference
         joint_trajectory,
         captures,
         *([preview_html] if preview is not None else []),
+        *extra_writers,
         report,
     ]
     return write_results(

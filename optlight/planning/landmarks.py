@@ -97,7 +97,7 @@ class Landmark:
     azimuth: float
     position: Array
     cost: float
-    status: Literal["refined", "polished", "sweep", "placed"]
+    status: Literal["refined", "polished", "sweep", "placed", "set", "grid"]
     solver_status: str
     iterations: int
     time_s: float
@@ -125,7 +125,7 @@ class LandmarkSet:
     ``notes``: the landmarks whose best light lay there, and where the best clear light is."""
 
     landmarks: tuple[Landmark, ...]
-    mode: Literal["azimuth", "free"]
+    mode: Literal["azimuth", "free", "set"]
     reference_histogram: Array
     reference_label: str
     histograms: Array
