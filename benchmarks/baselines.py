@@ -74,53 +74,36 @@ def paper_sweep(
 
 def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     """The paper's pipeline from landmarks to a timed trajectory: great-circle knots, generalized IK
-    at every knot (each started from the previous one), TOPPRA on those knots; no trajectory NLP.
+    at every knot (each started from the previous one), timed as our plans are; no trajectory NLP.
 
-    The same scene, landmark search, placement, path and timing code as :func:`optlight.solve`, so
-    the difference to it is the trajectory NLP alone. Returns the time (s, landmark search included),
-    the joint path length Σ|Δθ| (rad), the motion time without dwells (s), the largest |h| over the
-    knots (m, pinocchio) and whether the timed trajectory passes verification.
+    The same stages as :func:`optlight.solve` (captures, placement, visiting order, path, timing with
+    the transfers from and back to the start, verification), so the difference to it is the
+    trajectory NLP alone. Returns the time (s, landmark search included), the joint path length
+    Σ|Δθ| over the knots (rad), the motion time without dwells (s, transfers included), the largest
+    |h| over the knots (m, pinocchio) and whether the timed trajectory passes verification.
     """
     from optlight.geometry import h_residual
+    from optlight.pipeline import capture_path, choose_captures, time_knots, verify_knots
     from optlight.plan import joint_path_length
-    from optlight.planning.landmarks import find_landmarks
-    from optlight.planning.path import build_path
     from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
-    from optlight.planning.timing import time_parameterize
+    from optlight.planning.set_landmarks import tour_order
     from optlight.setup import Setup
-    from optlight.verify import verify_trajectory
 
     start = time.perf_counter()
     setup = Setup.from_problem(problem)
-    robot, sphere, limits = setup.robot, setup.sphere, setup.limits
-    landmarks = find_landmarks(setup)
-    placement = place_landmarks(setup, landmarks.landmarks)
-    order = visiting_order(setup, placement)
+    _, design, captures, _ = choose_captures(setup)
+    placement = place_landmarks(setup, captures)
+    order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
     positions = np.array([placement.landmarks[i].position for i in order])
-    path = build_path(sphere, positions, np.arange(len(order)), math.radians(problem.trajectory.knot_spacing_deg))
+    path = capture_path(setup, positions, placement.thetas[order])
     knots, _ = knot_ik(setup, path, placement.thetas[order])
-    velocity = limits.velocity
-    trajectory = time_parameterize(
-        [knots[s] for s in path.segments()] or [knots[:1]],
-        velocity,
-        limits.acceleration,
-        problem.trajectory.dwell_s,
-    )
+    trajectory = time_knots(setup, path, knots)
     elapsed = time.perf_counter() - start
     h = max(
-        float(np.abs(h_residual(*robot.light_pose(theta), sphere.center, sphere.radius)).max()) for theta in knots
+        float(np.abs(h_residual(*setup.robot.light_pose(theta), setup.sphere.center, setup.sphere.radius)).max())
+        for theta in knots
     )
-    report = verify_trajectory(
-        trajectory,
-        light_pose=robot.light_pose,
-        lower=robot.lower,
-        upper=robot.upper,
-        velocity_limit=velocity,
-        acceleration_limit=robot.acceleration_limit,
-        sphere=sphere,
-        landmark_positions=positions,
-        planned_path=path.positions,
-    )
+    report = verify_knots(setup, trajectory, positions, knots)
     intervals = trajectory.landmark_intervals
     return {
         "time_s": elapsed,

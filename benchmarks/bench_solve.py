@@ -2,12 +2,13 @@
 
     python benchmarks/bench_solve.py [PROBLEM] [--repeats N] [--json PATH]
 
-Ours: ``optlight.solve(problem)`` (scene, landmarks, placement, path, trajectory NLP, TOPPRA timing,
-verification), repeated; reported per repeat and as median / p98: its own stage timings, the joint
+Ours: ``optlight.solve(problem)`` (scene, landmarks or light set, placement, path, trajectory NLP,
+timing, verification), repeated; reported per repeat and as median / p98: its own stage timings, the joint
 path length Σ|Δθ| over the knots, the motion time (without dwells), the duration with dwells, the
 largest light residual |h| of the NLP, its iterations, the costs of the landmarks visited, and
 whether the NLP converged and the plan passed verification (success %). Baseline, in the same run
-and as many times: ``baselines.per_knot_ik_plan(problem)`` (the paper's per-knot generalized IK),
+and as many times: ``baselines.per_knot_ik_plan(problem)`` (the paper's per-knot generalized IK through the
+same stages, timed the same way),
 when ``baselines.py`` has it; otherwise the result says the baseline is missing.
 :func:`run` returns the numbers as a dict for the benchmark runner.
 """
@@ -87,7 +88,7 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
         "benchmark": "solve",
         "problem": spec.name,
         "robot": spec.robot.name,
-        "landmarks": spec.landmarks.count,
+        "captures": int(np.median([r["landmarks_visited"] for r in runs])),
         "repeats": repeats,
         "success_pct": 100.0 * float(np.mean([r["nlp_success"] and r["verification_passed"] for r in runs])),
         "plan": plan,
@@ -101,7 +102,7 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
 def _print(result: dict[str, Any]) -> None:
     plan, baseline = result["plan"], result["baseline"]
     print(
-        f"solve {result['problem']} ({result['robot']}, {result['landmarks']} landmarks), "
+        f"solve {result['problem']} ({result['robot']}, {result['captures']} captures), "
         f"{result['repeats']} repeat(s), success {result['success_pct']:.0f} %"
     )
     print(f"{'quantity':24s} {'median':>12s} {'p98':>12s} {'baseline':>12s}")

@@ -33,19 +33,22 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
-from optlight.planning.landmarks import distinct_landmarks, find_landmarks
-from optlight.planning.path import build_path
+from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
+from optlight.planning.path import LightPath, build_path
 from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
-from optlight.planning.set_landmarks import landmarks_of_set, set_summary, tour_order
+from optlight.planning.set_landmarks import SetDesign, landmarks_of_set, set_summary, tour_order
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import optimize_knots, plan_transfer
 from optlight.setup import Setup
 from optlight.spec import Problem
-from optlight.verify import verify_trajectory
+from optlight.verify import VerificationReport, verify_trajectory
+
+Array = NDArray[np.float64]
 
 #: progress(stage, done, total): called as each stage advances.
 Progress = Callable[[str, int, int], None]
@@ -75,15 +78,9 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
 
     with stage("scene"):
         setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
-    robot, sphere = setup.robot, setup.sphere
 
     start = time.perf_counter()
-    design = None
-    if setup.problem.lightset.kind != "none":  # a light set instead of the per-azimuth search
-        landmarks, design = landmarks_of_set(setup)
-    else:
-        landmarks = find_landmarks(setup, progress=lambda d, t: notify("landmarks", d, t))
-    captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
+    landmarks, design, captures, merged = choose_captures(setup, lambda d, t: notify("landmarks", d, t))
     timings["landmarks"] = time.perf_counter() - start
 
     with stage("placement"):
@@ -91,19 +88,11 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design else visiting_order(setup, placement)
+        order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
         positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
-        # the NLP's step bound |θ_{k+1} − θ_k|∞ ≤ max_step_rad must leave room to go between postures
-        reconfiguration = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
-        path = build_path(
-            sphere,
-            positions,
-            np.arange(len(visited)),
-            np.deg2rad(setup.trajectory_spec.knot_spacing_deg),
-            min_intervals=np.ceil(2.0 * reconfiguration / setup.trajectory_spec.max_step_rad).astype(int) + 1,
-        )
+        path = capture_path(setup, positions, landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
     lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures:
@@ -111,47 +100,12 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
 
     with stage("nlp"):
         nlp = optimize_knots(setup, path, warm)
-        approach = plan_transfer(setup, setup.start, nlp.theta[0])
-        retreat = (
-            plan_transfer(setup, nlp.theta[-1], setup.start) if setup.trajectory_spec.return_home else None
-        )
 
     with stage("timing"):
-        segments = [nlp.theta[s] for s in path.segments()] or [nlp.theta[:1]]  # one landmark: its dwell
-        limits, spec = setup.limits, setup.trajectory_spec
-        jerk_limited = spec.timing == "jerk_limited"
-        timed: Callable[..., Trajectory] = (
-            partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
-            if jerk_limited
-            else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
-        )
-        trajectory = timed(spec.dwell_s, joint_names=robot.joint_names, approach=approach, retreat=retreat)
+        trajectory = time_knots(setup, path, nlp.theta)
 
     with stage("verify"):
-        environment = setup.environment
-        report = verify_trajectory(
-            trajectory,
-            light_pose=robot.light_pose,
-            lower=setup.limits.lower,
-            upper=setup.limits.upper,
-            velocity_limit=setup.limits.velocity,
-            acceleration_limit=setup.limits.acceleration,
-            sphere=sphere,
-            landmark_positions=positions,
-            planned_path=np.array([robot.light_pose(t)[0] for t in nlp.theta]),
-            environment=(
-                (lambda q, t, captures: environment.check(robot, q, t, capture_times=captures))
-                if environment is not None
-                else None
-            ),
-            jerk_limit=limits.jerk if jerk_limited else None,
-            view=(
-                view_check_for(robot, setup.scene, setup.problem.light).check
-                if setup.problem.view.mode != "off"
-                else None
-            ),
-            rate_hz=max(1000.0, spec.rate_hz),
-        )
+        report = verify_knots(setup, trajectory, positions, nlp.theta)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -168,4 +122,83 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         timings=timings,
         warnings=tuple(notes),
         lightset=lightset,
+    )
+
+
+def choose_captures(
+    setup: Setup, progress: Callable[[int, int], None] | None = None
+) -> tuple[LandmarkSet, SetDesign | None, list[Landmark], list[str]]:
+    """Where the light should go: the ``[lightset]``'s lights designed together (then the design too),
+    or the per-azimuth landmark search on the view-clear lights; then the distinct captures (landmarks
+    closer than ``[landmarks] distinct_deg`` are one) and a note per merge."""
+    design = None
+    if setup.problem.lightset.kind != "none":
+        landmarks, design = landmarks_of_set(setup)
+    else:
+        landmarks = find_landmarks(setup, progress=progress)
+    captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
+    return landmarks, design, captures, merged
+
+
+def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> LightPath:
+    """Great-circle knots through the captures ``positions`` (M, 3) (m) in their visiting order, at
+    ``[trajectory] knot_spacing_deg``; between two captures whose postures ``landmark_thetas`` (M, n)
+    differ by Δ (rad, largest joint), at least ⌈2Δ / max_step_rad⌉ + 1 intervals, so that the NLP's
+    step bound |θ_{k+1} − θ_k|∞ ≤ max_step_rad leaves room to go between the postures."""
+    spec = setup.trajectory_spec
+    reconfiguration = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
+    return build_path(
+        setup.sphere,
+        positions,
+        np.arange(len(positions)),
+        np.deg2rad(spec.knot_spacing_deg),
+        min_intervals=np.ceil(2.0 * reconfiguration / spec.max_step_rad).astype(int) + 1,
+    )
+
+
+def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
+    """The timed trajectory through the knots ``theta`` (K, n) (rad) of ``path``: the transfer from the
+    start configuration to the first capture and back (``[trajectory] return_home``), then per
+    landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
+    dwell of ``dwell_s`` at every landmark."""
+    spec, limits = setup.trajectory_spec, setup.limits
+    approach = plan_transfer(setup, setup.start, theta[0])
+    retreat = plan_transfer(setup, theta[-1], setup.start) if spec.return_home else None
+    segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
+    timed: Callable[..., Trajectory] = (
+        partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
+        if spec.timing == "jerk_limited"
+        else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
+    )
+    return timed(spec.dwell_s, joint_names=setup.robot.joint_names, approach=approach, retreat=retreat)
+
+
+def verify_knots(setup: Setup, trajectory: Trajectory, positions: Array, theta: Array) -> VerificationReport:
+    """Verify ``trajectory`` independently of the planner, at max(1 kHz, ``rate_hz``): limits (jerk
+    and acceleration continuity when jerk-limited), h and aim at the captures ``positions`` (M, 3)
+    (m), deviation from the path of the knots ``theta`` (K, n), the environment by exact coal
+    distances, the camera's view and the beam by exact ray casting at the captures."""
+    robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
+    return verify_trajectory(
+        trajectory,
+        light_pose=robot.light_pose,
+        lower=limits.lower,
+        upper=limits.upper,
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+        sphere=setup.sphere,
+        landmark_positions=positions,
+        planned_path=np.array([robot.light_pose(t)[0] for t in theta]),
+        environment=(
+            (lambda q, t, captures: environment.check(robot, q, t, capture_times=captures))
+            if environment is not None
+            else None
+        ),
+        jerk_limit=limits.jerk if spec.timing == "jerk_limited" else None,
+        view=(
+            view_check_for(robot, setup.scene, setup.problem.light).check
+            if setup.problem.view.mode != "off"
+            else None
+        ),
+        rate_hz=max(1000.0, spec.rate_hz),
     )
