@@ -1,6 +1,6 @@
 """Light sets with the robot: requested vs achieved lights and motion per capture, whole pipeline.
 
-For the built-in light-set problems (``yale_grid``: the 64 Yale B directions; ``rti_dome``: 36 lights
+For the built-in light-set problems (``yale_grid``: the 64 Yale B directions; ``rti_dome``: 48 lights
 spread evenly; ``photometric_stereo``: 10 lights), each repeat a full :func:`optlight.solve`:
 
 - the lights requested and achieved (captured): ``achieved_pct`` (100 · achieved / requested), to

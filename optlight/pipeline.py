@@ -158,12 +158,17 @@ def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> Ligh
 
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     """The timed trajectory through the knots ``theta`` (K, n) (rad) of ``path``: the transfer from the
-    start configuration to the first capture and back (``[trajectory] return_home``), then per
+    start configuration to the first capture and back (``[trajectory] return_home``; back the way it
+    came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
     dwell of ``dwell_s`` at every landmark."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
-    retreat = plan_transfer(setup, theta[-1], setup.start) if spec.return_home else None
+    retreat = (
+        plan_transfer(setup, theta[-1], setup.start, detour=np.vstack([theta[::-1], approach[::-1]]))
+        if spec.return_home
+        else None
+    )
     segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
     timed: Callable[..., Trajectory] = (
         partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)

@@ -38,7 +38,7 @@ import coal
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.environment import LIGHT, Environment
+from optlight.environment import CAPTURE_SLACK, LIGHT, Environment
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
@@ -239,8 +239,9 @@ def view_zenith(
 ) -> float:
     """The smallest zenith (rad) at which the light housing clears the camera's view cone (0 when the
     view is off): lights nearer the camera's axis would put the lamp in front of the lens. Clear means
-    both exactly (:func:`housing_clearance`) and for the NLPs' spheres (:func:`housing_sphere_clearance`),
-    so that every light the search proposes is one the placement and trajectory NLPs can hold. Found by
+    both exactly (:func:`housing_clearance`) and for the NLPs' spheres (:func:`housing_sphere_clearance`,
+    by :data:`~optlight.environment.CAPTURE_SLACK` as the placements' rows), so that every light the
+    search proposes is one the placement and trajectory NLPs can hold. Found by
     bisection (the clearance grows with the zenith) to 1e-7 rad and rounded up; a
     :class:`ProblemError` naming ``light_sphere.zenith_max_deg`` when no light of the cap is clear."""
     if environment is None or environment.view_cone is None:
@@ -249,7 +250,7 @@ def view_zenith(
     def clear(zenith: float) -> bool:
         return (
             housing_clearance(sphere, environment, zenith) >= 0.0
-            and housing_sphere_clearance(sphere, environment, robot, zenith) >= 0.0
+            and housing_sphere_clearance(sphere, environment, robot, zenith) >= CAPTURE_SLACK
         )
 
     lo, hi = sphere.zenith_min, sphere.zenith_max

@@ -11,6 +11,7 @@ import pytest
 from conftest import REACH_ONLY, reduced_problem
 
 import optlight
+from optlight.environment import CAPTURE_SLACK
 from optlight.errors import ProblemError
 from optlight.planning.landmarks import Landmark, distinct_landmarks, find_landmarks
 from optlight.setup import Setup, housing_clearance, housing_sphere_clearance
@@ -48,15 +49,15 @@ def test_the_view_takes_away_the_lights_in_front_of_the_lens(setup: Setup) -> No
     theta_v = setup.view_zenith
     assert theta_v > setup.scene.sphere.zenith_min
     assert setup.sphere.zenith_min == theta_v
-    # a little nearer the axis the housing is in the view at some azimuth, from the boundary on at none
+    # a degree nearer the axis the housing is in the view at some azimuth, from the boundary on at none
     azimuths = np.radians(np.arange(0.0, 360.0, 15.0))
-    assert max(_housing_points_in_view(setup, theta_v - math.radians(0.3), phi) for phi in azimuths) > 0
+    assert max(_housing_points_in_view(setup, theta_v - math.radians(1.0), phi) for phi in azimuths) > 0
     assert all(_housing_points_in_view(setup, theta_v, phi) == 0 for phi in azimuths)
     assert all(_housing_points_in_view(setup, theta_v + math.radians(5.0), phi) == 0 for phi in azimuths)
-    # the boundary is where the tighter of the two housing models (exact coal shape, the NLPs' spheres
-    # over every roll) just touches the cone; the other is clear there by at most the spheres' padding
+    # the boundary is where the tighter of the two housing models just holds: the exact coal shape
+    # touches the cone, or the NLPs' spheres (over every roll) keep CAPTURE_SLACK from it
     exact = housing_clearance(setup.sphere, setup.environment, theta_v)
-    spheres = housing_sphere_clearance(setup.sphere, setup.environment, setup.robot, theta_v)
+    spheres = housing_sphere_clearance(setup.sphere, setup.environment, setup.robot, theta_v) - CAPTURE_SLACK
     assert min(exact, spheres) == pytest.approx(0.0, abs=1e-6) and 0.0 <= max(exact, spheres) < 5e-3
 
 

@@ -85,6 +85,13 @@ __all__ = [
 ]
 
 #: Names the environment gives its own obstacles (and the light housing, the view cone).
+#: Environment rows (m) a capture keeps beyond the trajectory NLP's (c, v ≥ 0): the placements hold
+#: their postures this far inside, and the landmark search's lights keep the housing this far out of
+#: the view cone. A capture exactly on a row's bound, its light pinned, leaves the trajectory NLP no
+#: interior there, and IPOPT reports it infeasible (seen on an RTI dome of 48 lights, a link
+#: touching the view cone).
+CAPTURE_SLACK = 0.002
+
 RESERVED_NAMES = ("object", "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE)
 
 

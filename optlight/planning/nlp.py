@@ -12,7 +12,8 @@ at a*" means the same expression in every NLP:
   (n × u₀)ᵀ(a − O) ≥ 0, (u₁ × n)ᵀ(a − O) ≥ 0 (between the arc's end directions u₀, u₁);
 - :func:`environment_rows` c(θ) ≥ 0 and v(θ) ≥ 0 (m): the clearance and view rows of an
   :class:`~optlight.environment.Environment`, built once per robot by the environment itself;
-- :func:`sphere_position` a(θ, φ) on the light sphere, symbolic.
+- :func:`sphere_position` a(θ, φ) on the light sphere, symbolic;
+- :func:`knot_bounds` the joint bounds of every NLP whose joint angles become knots of a trajectory.
 
 :func:`ipopt_options` gives IPOPT's settings from the solver configuration and :func:`run` calls a
 built ``nlpsol`` and returns a typed :class:`Solve`. Lengths in metres, angles in radians.
@@ -47,6 +48,17 @@ class Solve:
     iterations: int
     status: str
     success: bool
+
+
+#: Distance (rad or m) the knots keep from the joint limits, so that the spline timed through them
+#: stays inside the limits between knots (a knot exactly on a bound let it overshoot by ~2e-6 rad).
+LIMIT_MARGIN = 5e-3
+
+
+def knot_bounds(robot: Robot) -> tuple[Array, Array]:
+    """(lower, upper) (n,): the joint limits less :data:`LIMIT_MARGIN`. The placements use them as
+    the trajectory NLP does, so a capture posture they find is one the trajectory NLP may keep."""
+    return robot.lower + LIMIT_MARGIN, robot.upper - LIMIT_MARGIN
 
 
 def ipopt_options(solver: SolverSpec, **overrides: Any) -> dict[str, Any]:

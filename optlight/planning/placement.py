@@ -8,8 +8,8 @@ light's direction in the sphere frame (unit when h = 0):
     s.t.   h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0              on the sphere, aimed at O (DESIGN §3)
            −sin φ u_x + cos φ u_y = 0,   cos φ u_x + sin φ u_y ≥ 0   in the half-plane of azimuth φ
            cos θ_max ≤ u_z ≤ cos θ_min                             the allowed zenith range
-           c(θ) ≥ 0,   v(θ) ≥ 0                                     clearance, view (environment on)
-           lower ≤ θ ≤ upper                                       joint limits
+           c(θ) ≥ s,   v(θ) ≥ s                                     clearance, view (environment on)
+           lower + m ≤ θ ≤ upper − m                               joint limits less m = LIMIT_MARGIN
 
 ``D̃`` is the differentiable objective (:attr:`Objective.function`: smooth max and clip) at the
 landmark search's resolution (:func:`optlight.planning.landmarks.search_scene`), so a sphere-space
@@ -22,9 +22,11 @@ environment (:class:`~optlight.environment.Environment`) join: the clearance c(�
 the obstacles minus ``margin``, sphere pairs of the self pairs minus ``self_margin``) and, unless the
 view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres to the camera's view
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
-modes. A landmark whose light the robot only reaches by colliding or blocking the camera then moves
-along its azimuth to the best light it reaches clear of both, exactly as an unreachable one does; the
-trajectory NLP, which pins its landmark knots, could not do that itself.
+modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
+(rows ≥ 0) starts inside its feasible set. A landmark whose light the robot only reaches by
+colliding or blocking the camera then moves along its azimuth to the best light it reaches clear of
+both, exactly as an unreachable one does; the trajectory NLP, which pins its landmark knots, could
+not do that itself.
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
 (−∞ ≤ g ≤ ∞): one graph and one ``nlpsol``, as :class:`~optlight.planning.landmarks.CapRefiner`
@@ -65,11 +67,19 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.environment import Environment
+from optlight.environment import CAPTURE_SLACK, Environment
 from optlight.geometry import h_residual
 from optlight.objectives import Objective
 from optlight.planning.landmarks import exact_cost
-from optlight.planning.nlp import environment_rows, ipopt_options, light_rows, pin_rows, run, tangent_basis
+from optlight.planning.nlp import (
+    environment_rows,
+    ipopt_options,
+    knot_bounds,
+    light_rows,
+    pin_rows,
+    run,
+    tangent_basis,
+)
 from optlight.robot import KinematicState, generalized_ik
 from optlight.scene import Scene
 from optlight.setup import Setup
@@ -150,6 +160,7 @@ class LightPlacement:
     def __init__(self, setup: Setup) -> None:
         self.scene = setup.scene
         self.robot = robot = setup.robot
+        self._lower, self._upper = knot_bounds(robot)
         self.sphere = sphere = setup.sphere
         self.objective = setup.objective
         self.search = setup.search_scene
@@ -195,7 +206,7 @@ class LightPlacement:
         # active there with a gradient that vanishes on the sphere, which stalls IPOPT (no LICQ).
         lo = math.cos(sphere.zenith_max) if sphere.zenith_max < math.pi else -np.inf
         hi = math.cos(sphere.zenith_min) if sphere.zenith_min > 0.0 else np.inf
-        env_lo, env_hi = np.zeros(n_env), np.full(n_env, np.inf)
+        env_lo, env_hi = np.full(n_env, CAPTURE_SLACK), np.full(n_env, np.inf)
         self._bounds = {
             "fixed": (
                 np.r_[0.0, 0.0, 0.0, 0.0, 0.0, lo, env_lo],
@@ -215,7 +226,7 @@ class LightPlacement:
         t0 = time.perf_counter()
         lbg, ubg = self._bounds["free" if azimuth is None else "fixed"]
         phi = 0.0 if azimuth is None else float(azimuth)
-        bounds = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
+        bounds = {"lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
         theta = np.asarray(theta0, float)
         mask = self.search.visibility(self._on_sphere(self.robot.light_pose(theta)[0]))
         best: PlacementResult | None = None
@@ -245,7 +256,7 @@ class LightPlacement:
         in m/rad) over the joints farther than :data:`AT_LIMIT` from their limits; 0 when fewer than
         5 are. Near 0 on the boundary of the reachable set."""
         theta = np.asarray(theta, float)
-        free = (theta > self.robot.lower + AT_LIMIT) & (theta < self.robot.upper - AT_LIMIT)
+        free = (theta > self._lower + AT_LIMIT) & (theta < self._upper - AT_LIMIT)
         if free.sum() < 5:
             return 0.0
         jacobian = KinematicState.compute(self.robot, theta).local_jacobian[:5, free]
@@ -265,7 +276,7 @@ class LightPlacement:
         ``time_s`` are the caller's to fill). IPOPT relaxes the joint bounds (by ~1e-8 relative, its
         ``bound_relax_factor``; 1e-10 rad seen with active clearance rows): θ is projected into the
         limits first, and everything is checked there."""
-        theta = np.clip(theta, self.robot.lower, self.robot.upper)
+        theta = np.clip(theta, self._lower, self._upper)
         position, rotation = self.robot.light_pose(theta)
         h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
         zenith, azimuth = self.sphere.angles(position)
@@ -327,7 +338,7 @@ class LightPlacement:
             if not ik.success:
                 continue
             lbg[ZENITH_ROW] = ubg[ZENITH_ROW] = math.cos(zenith)
-            args = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": lbg, "ubg": ubg}
+            args = {"lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
             solved = run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
             iterations += solved.iterations
             inside.append(self._result(solved.x, solved.success, solved.status))
@@ -350,15 +361,16 @@ class ClearPosture:
     vectors t₁, t₂ tangent to the sphere at a*:
 
         min |θ − θ₀|²   s.t.  h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0,  t_iᵀ (a(θ) − a*) = 0 (i = 1, 2),
-                              c(θ) ≥ 0,  v(θ) ≥ 0,  lower ≤ θ ≤ upper
+                              c(θ) ≥ s,  v(θ) ≥ s,  lower + m ≤ θ ≤ upper − m
 
     (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
-    its view cone is on). The sphere is the problem's; IPOPT's iteration limit and tolerance come
-    from ``[solver]``. Built once; :meth:`solve` checks its answer with pinocchio.
+    its view cone is on; s = :data:`~optlight.environment.CAPTURE_SLACK`). The sphere is the
+    problem's; IPOPT's iteration limit and tolerance come from ``[solver]``. Built once; :meth:`solve` checks its answer with pinocchio.
     """
 
     def __init__(self, setup: Setup, environment: Environment) -> None:
         self.robot = robot = setup.robot
+        self._lower, self._upper = knot_bounds(robot)
         self.environment = environment
         self.sphere = sphere = setup.sphere
         n = robot.n
@@ -371,7 +383,7 @@ class ClearPosture:
             pin_rows(a, target, t1, t2),
             environment_rows(environment, robot, theta),
         )
-        self._lbg = np.zeros(g.size1())  # 5 equalities, then the environment's rows ≥ 0
+        self._lbg = np.r_[np.zeros(5), np.full(g.size1() - 5, CAPTURE_SLACK)]  # 5 equalities, then rows
         self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
         options = ipopt_options(setup.solver, ipopt__hessian_approximation="exact")
         nlp: dict[str, Any] = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
@@ -386,11 +398,11 @@ class ClearPosture:
         target = np.asarray(target, float)
         t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)
-        bounds = {"lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": self._lbg, "ubg": self._ubg}
+        bounds = {"lbx": self._lower, "ubx": self._upper, "lbg": self._lbg, "ubg": self._ubg}
         solved = run(self.nlp, {"x0": theta0, "p": np.r_[theta0, target, t1, t2], **bounds})
         if not solved.success:
             return None
-        theta = np.clip(solved.x, self.robot.lower, self.robot.upper)
+        theta = np.clip(solved.x, self._lower, self._upper)
         position, rotation = self.robot.light_pose(theta)
         h = float(np.abs(h_residual(position, rotation, self.sphere.center, self.sphere.radius)).max())
         clearance, row = self.environment.worst_sphere_row(self.robot, theta)

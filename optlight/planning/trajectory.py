@@ -7,7 +7,7 @@ position and rotation from the symbolic forward kinematics:
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
-- joint bounds (minus :data:`LIMIT_MARGIN`), and |θ_{k+1} − θ_k| ≤ max_step per joint;
+- joint bounds (minus :data:`~optlight.planning.nlp.LIMIT_MARGIN`), and |θ_{k+1} − θ_k| ≤ max_step per joint;
 - with an environment (:mod:`optlight.environment`): clearance c(θ_k) ≥ 0 at every knot (robot
   spheres to obstacles and to each other, margins included) and the view cone kept clear,
   v(θ_k) ≥ 0, at the landmark knots (view "capture") or at every knot (view "path").
@@ -35,6 +35,7 @@ from optlight.planning.nlp import (
     arc_rows,
     environment_rows,
     ipopt_options,
+    knot_bounds,
     light_rows,
     pin_rows,
     tangent_basis,
@@ -44,10 +45,6 @@ from optlight.setup import Setup
 from optlight.spec import SolverSpec
 
 Array = NDArray[np.float64]
-
-#: Distance (rad) the knots keep from the joint limits, so that the spline TOPPRA times through them
-#: stays inside the limits between knots (a knot exactly on a bound let it overshoot by ~2e-6 rad).
-LIMIT_MARGIN = 5e-3
 
 
 @dataclass(frozen=True)
@@ -200,9 +197,8 @@ class TrajectoryOptimizer:
         per_knot[:, 15:18] = path.positions
         p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
         lbg, ubg = self.bounds(n_knots, len(landmark_knots))
-        # knots keep LIMIT_MARGIN from the joint limits: the timed spline through them may overshoot
-        lbx = np.tile(self.robot.lower + LIMIT_MARGIN, n_knots)
-        ubx = np.tile(self.robot.upper - LIMIT_MARGIN, n_knots)
+        lower, upper = knot_bounds(self.robot)
+        lbx, ubx = np.tile(lower, n_knots), np.tile(upper, n_knots)
         x0 = np.clip(np.asarray(theta0, float).ravel(), lbx, ubx)
         start = time.perf_counter()
         out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
@@ -276,17 +272,18 @@ TRANSFER_STEP = 0.1
 TRANSFER_PADDING = 0.002
 
 
-def plan_transfer(setup: Setup, start: Array, goal: Array) -> Array:
-    """Joint angles (K, n) from ``start`` to ``goal`` (rad), both included, knots at most
-    :data:`TRANSFER_STEP` apart per joint: the light is off the sphere here, moving to or from the
-    captures.
+def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | None = None) -> Array:
+    """Joint angles (K, n) from ``start`` to ``goal`` (rad), both included: the light is off the
+    sphere here, moving to or from the captures.
 
-    The straight line in joint space when it keeps clear of the environment (collisions; and the view,
-    ``[view] mode = "path"``) at every knot, by the NLPs' sphere model; otherwise the transfer NLP
-    from that line: min Σ_k Σ_j W_j (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the
-    velocity limits) s.t. the rows ≥ :data:`TRANSFER_PADDING` at the interior knots, joint limits and
-    the end points fixed.
-    Raises :class:`SolverError` when that fails."""
+    The straight line in joint space, knots at most :data:`TRANSFER_STEP` apart per joint, when it
+    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``) at every knot,
+    by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
+    (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the velocity limits) s.t. the rows ≥
+    :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed. When the
+    NLP fails from the line (a line deep in an obstacle can leave IPOPT in a local infeasibility), it
+    starts again from ``detour`` (K', n), a known clear way from ``start`` to ``goal`` (the way back
+    along the plan), which it shortens. Raises :class:`SolverError` when that fails too."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     count = max(2, int(np.ceil(np.max(np.abs(goal - start)) / TRANSFER_STEP)) + 1)
     line = start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)
@@ -302,25 +299,54 @@ def plan_transfer(setup: Setup, start: Array, goal: Array) -> Array:
 
     if all(rows(theta).min(initial=np.inf) >= TRANSFER_PADDING for theta in line[1:-1]):
         return line
-    n, inner = robot.n, count - 2
+    q = ca.MX.sym("q", robot.n)
+    row_function = ca.Function("transfer_rows", [q], [environment_rows(environment, robot, q, view=view)])
+    status = ""
+    for initial in (line, None if detour is None else _thinned(np.asarray(detour, float), TRANSFER_STEP)):
+        if initial is None or len(initial) < 3:
+            continue
+        knots, status = _transfer_nlp(setup, row_function, start, goal, initial[1:-1])
+        if knots is not None and all(rows(t).min(initial=np.inf) >= TRANSFER_PADDING - 1e-8 for t in knots):
+            return np.vstack([start, knots, goal])
+    raise SolverError(
+        f"no transfer clear of the environment between the start configuration and the captures "
+        f"({status}); choose another [robot] start"
+    )
+
+
+def _transfer_nlp(
+    setup: Setup, row_function: ca.Function, start: Array, goal: Array, initial: Array
+) -> tuple[Array | None, str]:
+    """The transfer NLP of :func:`plan_transfer` over ``len(initial)`` interior knots from ``initial``
+    (rad): the interior knots (None when IPOPT fails) and IPOPT's status."""
+    n, inner = setup.robot.n, len(initial)
     x = ca.MX.sym("theta", n, inner)
     ends = ca.MX.sym("ends", n, 2)
     knots = ca.horzcat(ends[:, 0], x, ends[:, 1])
     steps = knots[:, 1:] - knots[:, :-1]
     weights = ca.DM(1.0 / setup.limits.velocity)
-    theta = ca.MX.sym("q", n)
-    row_function = ca.Function("transfer_rows", [theta], [environment_rows(environment, robot, theta, view=view)])
     g = ca.vec(row_function.map(inner)(x))
     nlp = {"x": ca.vec(x), "p": ca.vec(ends), "f": ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps), "g": g}
     solver = ca.nlpsol("transfer", "ipopt", nlp, ipopt_options(setup.solver, ipopt__hessian_approximation="exact"))
-    lower = np.tile(robot.lower + LIMIT_MARGIN, inner)
-    upper = np.tile(robot.upper - LIMIT_MARGIN, inner)
-    x0 = np.clip(line[1:-1].ravel(), lower, upper)
+    lower, upper = (np.tile(bound, inner) for bound in knot_bounds(setup.robot))
+    x0 = np.clip(initial.ravel(), lower, upper)  # knot by knot, as ca.vec(x) stacks them
     out = solver(x0=x0, p=np.c_[start, goal].T.ravel(), lbx=lower, ubx=upper, lbg=TRANSFER_PADDING, ubg=np.inf)
-    inner_knots = np.asarray(out["x"]).reshape(inner, n)
-    if not solver.stats()["success"] or any(rows(t).min(initial=np.inf) < TRANSFER_PADDING - 1e-8 for t in inner_knots):
-        raise SolverError(
-            f"no transfer clear of the environment between the start configuration and the captures "
-            f"({solver.stats()['return_status']}); choose another [robot] start"
-        )
-    return np.vstack([start, inner_knots, goal])
+    status = str(solver.stats()["return_status"])
+    if not solver.stats()["success"]:
+        return None, status
+    return np.asarray(out["x"]).reshape(inner, n), status
+
+
+def _thinned(knots: Array, step: float) -> Array:
+    """The knots (K, n) (rad) thinned to fewer whose neighbours are at most ``step`` apart per joint
+    where the original's are (greedy: from each kept knot, the farthest knot still within ``step``);
+    the first and last are kept."""
+    kept, last = [0], 0
+    for k in range(1, len(knots)):
+        if np.max(np.abs(knots[k] - knots[last])) > step and k - 1 > last:
+            kept.append(k - 1)
+            last = k - 1
+    if kept[-1] != len(knots) - 1:
+        kept.append(len(knots) - 1)
+    return knots[kept]
+
