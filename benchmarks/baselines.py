@@ -83,16 +83,16 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     |h| over the knots (m, pinocchio) and whether the timed trajectory passes verification.
     """
     from optlight.geometry import h_residual
-    from optlight.pipeline import capture_path, choose_captures, time_knots, verify_knots
+    from optlight.pipeline import capture_path, choose_captures, place_captures, time_knots, verify_knots
     from optlight.plan import joint_path_length
-    from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
+    from optlight.planning.policy import knot_ik, visiting_order
     from optlight.planning.set_landmarks import tour_order
     from optlight.setup import Setup
 
     start = time.perf_counter()
     setup = Setup.from_problem(problem)
     _, design, captures, _ = choose_captures(setup)
-    placement = place_landmarks(setup, captures)
+    placement = place_captures(setup, captures, design)
     order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
     positions = np.array([placement.landmarks[i].position for i in order])
     path = capture_path(setup, positions, placement.thetas[order])
@@ -100,7 +100,9 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     trajectory = time_knots(setup, path, knots)
     elapsed = time.perf_counter() - start
     h = max(
-        float(np.abs(h_residual(*setup.robot.light_pose(theta), setup.sphere.center, setup.sphere.radius)).max())
+        float(
+            np.abs(h_residual(*setup.robot.light_pose(theta), setup.sphere.center, setup.sphere.radius)).max()
+        )
         for theta in knots
     )
     report = verify_knots(setup, trajectory, positions, knots)

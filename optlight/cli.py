@@ -93,6 +93,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 def _cmd_solve(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
     from rich.table import Table
 
@@ -126,12 +127,13 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     interrupts.check()
     table = Table(title=f"optlight solve {problem.name}", show_header=False)
     for key, value in _summary_rows(plan.summary()):
-        table.add_row(key, value)
+        table.add_row(escape(key), escape(value))
     console.print(table)
     for note in plan.warnings:
-        console.print(f"[yellow]warning:[/yellow] {note}")
+        # escaped: notes name problem-file sections ("[landmarks] allow_partial"), not rich markup
+        console.print(f"[yellow]warning:[/yellow] {escape(note)}")
     if not plan.verification.passed:
-        console.print(plan.verification.summary())
+        console.print(escape(plan.verification.summary()))
     with console.status(f"writing {out}/ (figures, preview, report)"):
         plan.save(out, overwrite=args.force)  # refuses (VerificationError) when verification failed
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -40,8 +40,14 @@ from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
 from optlight.planning.path import LightPath, build_path
-from optlight.planning.policy import knot_ik, place_landmarks, visiting_order
-from optlight.planning.set_landmarks import SetDesign, landmarks_of_set, set_summary, tour_order
+from optlight.planning.policy import LandmarkPlacement, Reacher, knot_ik, place_landmarks, visiting_order
+from optlight.planning.set_landmarks import (
+    SetDesign,
+    SetReplacement,
+    landmarks_of_set,
+    set_summary,
+    tour_order,
+)
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import optimize_knots, plan_transfer
 from optlight.setup import Setup
@@ -84,7 +90,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     timings["landmarks"] = time.perf_counter() - start
 
     with stage("placement"):
-        placement = place_landmarks(setup, captures)
+        placement = place_captures(setup, captures, design)
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
@@ -138,6 +144,15 @@ def choose_captures(
         landmarks = find_landmarks(setup, progress=progress)
     captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
     return landmarks, design, captures, merged
+
+
+def place_captures(setup: Setup, captures: Sequence[Landmark], design: SetDesign | None) -> LandmarkPlacement:
+    """Joint angles at the captures (:func:`~optlight.planning.policy.place_landmarks`); a light set
+    replaces a light the robot cannot reach clear by the one that best keeps the set
+    (:class:`~optlight.planning.set_landmarks.SetReplacement`)."""
+    reacher = Reacher(setup)
+    replacement = SetReplacement(setup, design, captures, reacher) if design is not None else None
+    return place_landmarks(setup, captures, reacher, replacement=replacement)
 
 
 def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> LightPath:

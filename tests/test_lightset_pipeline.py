@@ -13,7 +13,11 @@ from conftest import reduced_problem
 import optlight
 from optlight.datasets import read_diligent
 from optlight.photometric_stereo import gbuffer_normal_map
+from optlight.pipeline import choose_captures
 from optlight.plan import PHOTOMETRIC_STEREO_FOLDER, Plan
+from optlight.planning.policy import Reacher
+from optlight.planning.set_landmarks import SetReplacement
+from optlight.setup import Setup
 
 
 @pytest.fixture(scope="module")
@@ -106,3 +110,51 @@ def test_grid_replaces_the_lights_in_the_camera_view() -> None:
     # moved at least to the view's edge: the lamp enters the view below zenith view_zenith
     assert replaced[0]["moved_deg"] >= math.degrees(plan.setup.view_zenith) - 1e-6
     assert any("grid lights lie outside the allowed cap" in w for w in plan.warnings)  # in plan.json too
+
+
+@pytest.mark.parametrize("kind", ["rti", "grid"])
+def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: str) -> None:
+    """SetReplacement against brute force: every candidate near the light that scores better than the
+    replacement (a lower set cost with the other lights fixed; for a grid, nearer the requested
+    direction) is one the robot does not reach clear, and the replacement's joint angles put the
+    light there (pinocchio) with every environment row clear."""
+    sections: dict = {"count": 8, "starts": 1}
+    if kind == "grid":
+        sections = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8}
+    setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32, lightset=sections))
+    _, design, captures, _ = choose_captures(setup)
+    assert design is not None
+    reacher = Reacher(setup)
+    rule = SetReplacement(setup, design, captures, reacher)
+    light = captures[3]
+    here = rule.directions[light.index]
+    others = np.array([d for i, d in rule.directions.items() if i != light.index])
+    attempts = [reacher.attempt(light.position, setup.robot.theta_ref)]
+    found = rule(light, attempts, setup.robot.theta_ref)
+    assert not isinstance(found, str), found
+    replacement, theta, note = found
+    sphere = setup.sphere
+    position, _ = setup.robot.light_pose(theta)
+    np.testing.assert_allclose(position, replacement.position, atol=1e-6)
+    assert setup.environment is not None
+    assert setup.environment.worst_sphere_row(setup.robot, theta)[0] >= 0.0
+    assert replacement.status == "placed" and "best keeps the set" in note
+
+    def score(direction: np.ndarray) -> float:
+        if design.cost is None:
+            return -float(direction @ design.requested[light.index])
+        return design.cost.numpy(np.vstack([others, direction]))
+
+    chosen = (replacement.position - sphere.center) @ sphere.rotation / sphere.radius
+    nearest = rule.lattice[np.argsort(-(rule.lattice @ here))[:40]]
+    better = [d for d in nearest if score(d) < score(chosen) - 1e-12]
+    # the rule keeps the previous light's IK branch (here θ_ref's) when it can, and restarts otherwise
+    start = setup.robot.theta_ref
+    direct = reacher.attempt(replacement.position, start, restarts=False).theta is not None
+    for d in better:
+        position = sphere.center + sphere.radius * sphere.rotation @ d
+        assert reacher.attempt(position, start, restarts=False).theta is None, (
+            "a better light was passed over"
+        )
+        if not direct:
+            assert reacher.attempt(position, start).theta is None, "a better light was passed over"

@@ -20,7 +20,7 @@ pipeline, and the trajectory NLP's warm start). Angles in radians, lengths in me
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -99,21 +99,33 @@ class Reacher:
         return self._placement
 
 
-def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reacher | None = None) -> LandmarkPlacement:
-    """Joint angles at each landmark: :meth:`Reacher.attempt` chained from the previous landmark's
-    angles, then from θ_ref.
+#: What to do with a landmark the robot cannot reach clear: ``rule(landmark, attempts, previous)``,
+#: with the attempts best first (reached before not; then the larger clearance, or the smaller IK
+#: residual) and the previous landmark's joint angles, gives (the landmark that replaces it, its
+#: clear joint angles, a note saying what moved where and why) or, when there is none, a sentence
+#: saying what was tried. :class:`AzimuthPlacement` by default; a light set brings its own
+#: (:class:`optlight.planning.set_landmarks.SetReplacement`).
+Replacement = Callable[[Landmark, Sequence[Attempt], Array], tuple[Landmark, Array, str] | str]
 
-    Where neither attempt gives clear angles, the placement NLP runs on the landmark's azimuth from
-    the better attempt (reached before not; then the larger clearance, or the smaller IK residual),
-    then from the other: when it succeeds the landmark is replaced by the best light the robot reaches
-    clear on that azimuth, kept off the singular reach boundary (status "placed", its cost; a warning
-    says how far it moved and why).
+
+def place_landmarks(
+    setup: Setup,
+    landmarks: Sequence[Landmark],
+    reacher: Reacher | None = None,
+    *,
+    replacement: Replacement | None = None,
+) -> LandmarkPlacement:
+    """Joint angles at each landmark: :meth:`Reacher.attempt` chained from the previous landmark's
+    angles, then from θ_ref. Where neither attempt gives clear angles, ``replacement`` (by default
+    :class:`AzimuthPlacement`: the best light the robot reaches clear on the landmark's azimuth) puts
+    another light in its place, with a warning that says how far it moved and why.
 
     Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons),
     unless ``[landmarks] allow_partial``, which drops it with a warning.
     """
     reacher = reacher if reacher is not None else Reacher(setup)
-    robot, sphere = setup.robot, setup.sphere
+    rule = replacement if replacement is not None else AzimuthPlacement(setup, reacher)
+    robot = setup.robot
     kept: list[Landmark] = []
     thetas: list[Array] = []
     notes: list[str] = []
@@ -131,55 +143,23 @@ def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reache
             previous = clear
             continue
         attempts.sort(key=lambda a: (not a.ik.success, -a.clearance if a.ik.success else a.ik.residual))
+        found = rule(lm, attempts, previous)
+        if not isinstance(found, str):
+            kept.append(found[0])
+            thetas.append(found[1])
+            previous = found[1]
+            notes.append(f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {found[2]}")
+            continue
         best = attempts[0]
-        placed = reacher.placement.solve(lm.azimuth, best.ik.theta)
-        if not placed.success and attempts[1:]:
-            other = reacher.placement.solve(lm.azimuth, attempts[1].ik.theta)
-            placed = other if other.success else placed
         why = (
             f"out of reach of {robot.name}: {best.ik.message}"
             if not best.ik.success
             else f"blocked for {robot.name}: its IK solution brings {best.row} "
             f"{-best.clearance * 1e3:.1f} mm too close, and no posture near it is clear"
         )
-        if placed.success:
-            kept.append(
-                replace(
-                    lm,
-                    zenith=placed.zenith,
-                    position=placed.position,
-                    cost=placed.cost,
-                    status="placed",
-                    solver_status=placed.status,
-                    iterations=lm.iterations + placed.iterations,
-                    time_s=lm.time_s + placed.time_s,
-                )
-            )
-            thetas.append(placed.theta)
-            previous = placed.theta
-            goal = (
-                f"to be reachable by {robot.name}"
-                if not best.ik.success
-                else f"to clear the environment ({best.row} was {-best.clearance * 1e3:.1f} mm too close)"
-            )
-            before, after = f"{np.rad2deg(lm.zenith):.1f}°", f"{np.rad2deg(placed.zenith):.1f}°"
-            moved = (
-                f"moved from zenith {before} to {after}"
-                if before != after
-                else f"kept at zenith {before} with the placement's joint angles"
-            )
-            notes.append(
-                f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {moved} {goal} "
-                f"(cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
-            )
-            continue
-        clear_of = " clear of the environment" if setup.environment is not None else ""
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
-            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; nor is any light on its azimuth{clear_of} within "
-            f"zenith {np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
-            f"(placement NLP: {placed.message}"
-            f"{ITERATION_LIMIT_HINT if placed.status == IPOPT_ITERATION_LIMIT else ''})"
+            f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; {found}"
         )
         if not setup.landmark_spec.allow_partial:
             raise UnreachableError(
@@ -189,6 +169,61 @@ def place_landmarks(setup: Setup, landmarks: Sequence[Landmark], reacher: Reache
     if not kept:
         raise UnreachableError(f"no landmark is reachable by {robot.name}")
     return LandmarkPlacement(tuple(kept), _follow_back(reacher, kept, np.array(thetas)), tuple(notes))
+
+
+def why_moved(setup: Setup, best: Attempt) -> str:
+    """Why a landmark moved, from its best attempt: "to be reachable by …" or "to clear the
+    environment (… was … mm too close)"."""
+    if not best.ik.success:
+        return f"to be reachable by {setup.robot.name}"
+    return f"to clear the environment ({best.row} was {-best.clearance * 1e3:.1f} mm too close)"
+
+
+class AzimuthPlacement:
+    """The default :data:`Replacement`: the placement NLP on the landmark's azimuth, from the best
+    attempt's IK angles, then from the other's; when it succeeds the landmark is replaced by the best
+    light the robot reaches clear on that azimuth, kept off the singular reach boundary (status
+    "placed", its cost)."""
+
+    def __init__(self, setup: Setup, reacher: Reacher) -> None:
+        self.setup = setup
+        self.reacher = reacher
+
+    def __call__(
+        self, lm: Landmark, attempts: Sequence[Attempt], previous: Array
+    ) -> tuple[Landmark, Array, str] | str:
+        placement = self.reacher.placement
+        placed = placement.solve(lm.azimuth, attempts[0].ik.theta)
+        if not placed.success and attempts[1:]:
+            other = placement.solve(lm.azimuth, attempts[1].ik.theta)
+            placed = other if other.success else placed
+        sphere = self.setup.sphere
+        if not placed.success:
+            clear_of = " clear of the environment" if self.setup.environment is not None else ""
+            return (
+                f"nor is any light on its azimuth{clear_of} within zenith "
+                f"{np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
+                f"(placement NLP: {placed.message}"
+                f"{ITERATION_LIMIT_HINT if placed.status == IPOPT_ITERATION_LIMIT else ''})"
+            )
+        moved = replace(
+            lm,
+            zenith=placed.zenith,
+            position=placed.position,
+            cost=placed.cost,
+            status="placed",
+            solver_status=placed.status,
+            iterations=lm.iterations + placed.iterations,
+            time_s=lm.time_s + placed.time_s,
+        )
+        before, after = f"{np.rad2deg(lm.zenith):.1f}°", f"{np.rad2deg(placed.zenith):.1f}°"
+        how = (
+            f"moved from zenith {before} to {after}"
+            if before != after
+            else f"kept at zenith {before} with the placement's joint angles"
+        )
+        note = f"{how} {why_moved(self.setup, attempts[0])} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
+        return moved, placed.theta, note
 
 
 #: A posture further than this (rad, largest joint) from the next landmark's is searched again from it.

@@ -11,9 +11,10 @@ per-azimuth search (:mod:`optlight.planning.lightsets`):
 
 Each light becomes a :class:`~optlight.planning.landmarks.Landmark` (status "set" or "grid"; its
 ``cost`` is the image objective there, NumPy renderer with shadow rays at the search resolution), so
-it goes through the same placement (an unreachable light is moved along its azimuth by the placement
-NLP, or dropped with a warning under ``[landmarks] allow_partial``), path, NLP, timing and
-verification as any landmark. A set is captured in a short open tour in joint space.
+it goes through the same placement, path, NLP, timing and verification as any landmark. A light the
+robot cannot reach clear is replaced by :class:`SetReplacement`, the reachable clear light that best
+keeps the set (or dropped with a warning under ``[landmarks] allow_partial``). A set is captured in
+a short open tour in joint space.
 :func:`set_summary` compares what was requested with what the robot achieves: the light counts, how
 far each light moved, and the set cost at the requested and at the achieved directions.
 
@@ -25,7 +26,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -43,6 +44,7 @@ from optlight.planning.lightsets import (
     set_cost_from_problem,
 )
 from optlight.planning.path import azimuth_order, shortest_open_tour
+from optlight.planning.policy import Attempt, Reacher, why_moved
 from optlight.setup import Setup
 
 Array = NDArray[np.float64]
@@ -165,6 +167,88 @@ def joint_distance(thetas: Array, order: ArrayLike) -> float:
     between captures at equal joint speed limits."""
     steps = np.diff(thetas[np.asarray(order)], axis=0)
     return float(np.abs(steps).max(axis=1, initial=0.0).sum())
+
+
+#: Candidates a replacement scores: the nearest this many lattice lights to the light replaced.
+REPLACEMENT_CANDIDATES = 120
+#: Of those, how many it tries with the robot, best score first, before it gives the light up.
+REPLACEMENT_TRIES = 30
+
+
+class SetReplacement:
+    """The light set's rule for a light the robot cannot reach clear (a
+    :data:`~optlight.planning.policy.Replacement`): of the allowed cap's lattice at ``[lightset]
+    candidate_spacing_deg``, the :data:`REPLACEMENT_CANDIDATES` lights nearest the one replaced are
+    scored — designed kinds by the set cost with the other lights where they are (those replaced
+    before at their replacements), a grid by the angle to its requested direction — and tried with
+    the robot (:meth:`Reacher.attempt`) best score first; the first the robot reaches clear from the
+    previous light's angles (its IK branch), else the first it reaches clear from θ_ref with
+    restarts, replaces it (status "placed")."""
+
+    def __init__(
+        self, setup: Setup, design: SetDesign, landmarks: Sequence[Landmark], reacher: Reacher
+    ) -> None:
+        self.setup, self.design, self.reacher = setup, design, reacher
+        cap = allowed_cap(setup)
+        self.lattice = cap.lattice(cap.area_count(math.radians(setup.problem.lightset.candidate_spacing_deg)))
+        self.directions = dict(
+            zip((lm.index for lm in landmarks), directions_of(setup, landmarks), strict=True)
+        )
+
+    def _scores(self, index: int, candidates: Array) -> Array:
+        """Each candidate's score as light ``index`` (lower is better)."""
+        cost = self.design.cost
+        if cost is None:  # a grid: the nearest to what was requested
+            return -(candidates @ self.design.requested[index])
+        others = [d for i, d in self.directions.items() if i != index]
+        return np.array([cost.numpy(np.vstack([*others, c])) for c in candidates])
+
+    def __call__(
+        self, lm: Landmark, attempts: Sequence[Attempt], previous: Array
+    ) -> tuple[Landmark, Array, str] | str:
+        setup, sphere = self.setup, self.setup.sphere
+        here = self.directions[lm.index]
+        nearest = np.argsort(-(self.lattice @ here))[:REPLACEMENT_CANDIDATES]
+        scores = self._scores(lm.index, self.lattice[nearest])
+        tried = nearest[np.argsort(scores, kind="stable")][:REPLACEMENT_TRIES]
+        # first from the previous light's angles alone (the posture chain's IK branch: a restart may
+        # land on another, a reconfiguration the trajectory cannot make), then from θ_ref with restarts
+        found = None
+        for start, restarts in ((previous, False), (setup.robot.theta_ref, True)):
+            for k in tried:
+                position = sphere.center + sphere.radius * sphere.rotation @ self.lattice[k]
+                theta = self.reacher.attempt(position, start, restarts=restarts).theta
+                if theta is not None:
+                    found = (self.lattice[k], theta)
+                    break
+            if found is not None:
+                break
+        if found is not None:
+            direction, theta = found
+            before = self._score_text(lm.index, here)
+            self.directions[lm.index] = direction
+            after = self._score_text(lm.index, direction)
+            light = replace(_landmark(setup, lm.index, direction, "set"), status="placed")
+            moved = math.degrees(math.acos(float(np.clip(direction @ here, -1.0, 1.0))))
+            note = (
+                f"replaced by the light at zenith {math.degrees(light.zenith):.1f}°, azimuth "
+                f"{math.degrees(light.azimuth):.1f}°, {moved:.1f}° away, the reachable one that best keeps "
+                f"the set ({before} -> {after}) {why_moved(setup, attempts[0])}"
+            )
+            return light, theta, note
+        del self.directions[lm.index]  # dropped: out of the set the others are scored with
+        return (
+            f"nor is any of the {len(tried)} lights that best keep the set among the {len(nearest)} "
+            f"nearest it (lattice at [lightset] candidate_spacing_deg) reachable clear"
+        )
+
+    def _score_text(self, index: int, direction: Array) -> str:
+        """The score of ``direction`` as light ``index``, in words: the set cost, or the angle off the
+        requested grid direction."""
+        if self.design.cost is None:
+            off = math.degrees(math.acos(float(np.clip(direction @ self.design.requested[index], -1.0, 1.0))))
+            return f"{off:.1f}° off the grid direction"
+        return f"set cost {float(self._scores(index, direction[None])[0]):.4g}"
 
 
 def set_summary(
