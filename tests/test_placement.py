@@ -260,3 +260,32 @@ def test_azimuth_out_of_reach_is_named_or_dropped() -> None:
         "dropped landmark 1",
         "dropped landmark 2",
     ]
+
+
+def test_captures_keep_the_margins_where_they_can_and_the_rows_where_they_cannot(
+    small_setup: Setup, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On the default layout (view protected), the placement keeps its capture margin on the view and
+    clearance rows; with a margin no light can keep (10 m) it falls back to the NLP without the
+    margins and returns that light, on the rows' bounds but feasible, not a failure."""
+    setup = small_setup
+    assert setup.environment is not None
+    azimuth = math.radians(140.0)  # where the forearm comes near the view cone (test_view_plan)
+    start = generalized_ik(setup.robot, setup.sphere, (math.radians(30.0), azimuth), setup.robot.theta_ref)
+    assert start.success
+
+    def placed(slack: float) -> PlacementResult:
+        monkeypatch.setattr(placement_module, "CAPTURE_SLACK", slack)
+        result = LightPlacement(setup).solve(azimuth, start.theta)
+        assert result.success, result.message
+        assert abs(result.azimuth - azimuth) < 1e-6
+        return result
+
+    slack = placement_module.CAPTURE_SLACK
+    kept, relaxed, unkeepable = placed(slack), placed(0.0), placed(10.0)
+    assert kept.min_clearance_m >= slack - 1e-6
+    assert relaxed.min_clearance_m < slack - 1e-6  # the margin is active on this azimuth
+    assert relaxed.min_clearance_m >= -placement_module.CLEARANCE_TOL
+    assert unkeepable.min_clearance_m < 10.0
+    # the same light (the roll, the last joint, is free: the solves end at different rolls)
+    np.testing.assert_allclose(unkeepable.position, relaxed.position, atol=1e-6)

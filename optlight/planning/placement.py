@@ -23,10 +23,11 @@ the obstacles minus ``margin``, sphere pairs of the self pairs minus ``self_marg
 view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres to the camera's view
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
 modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
-(rows ≥ 0) starts inside its feasible set. A landmark whose light the robot only reaches by
-colliding or blocking the camera then moves along its azimuth to the best light it reaches clear of
-both, exactly as an unreachable one does; the trajectory NLP, which pins its landmark knots, could
-not do that itself.
+(rows ≥ 0) starts inside its feasible set (where no light of the azimuth keeps s: on the rows'
+bounds, :meth:`LightPlacement._run`). A landmark whose light the robot only reaches by colliding or
+blocking the camera then moves along its azimuth to the best light it reaches clear of both, exactly
+as an unreachable one does; the trajectory NLP, which pins its landmark knots, could not do that
+itself.
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
 (−∞ ≤ g ≤ ∞): one graph and one ``nlpsol``, as :class:`~optlight.planning.landmarks.CapRefiner`
@@ -72,6 +73,7 @@ from optlight.geometry import h_residual
 from optlight.objectives import Objective
 from optlight.planning.landmarks import exact_cost
 from optlight.planning.nlp import (
+    Solve,
     environment_rows,
     ipopt_options,
     knot_bounds,
@@ -226,13 +228,12 @@ class LightPlacement:
         t0 = time.perf_counter()
         lbg, ubg = self._bounds["free" if azimuth is None else "fixed"]
         phi = 0.0 if azimuth is None else float(azimuth)
-        bounds = {"lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
         theta = np.asarray(theta0, float)
         mask = self.search.visibility(self._on_sphere(self.robot.light_pose(theta)[0]))
         best: PlacementResult | None = None
         iterations = 0
         for _ in range(VISIBILITY_ROUNDS):
-            solved = run(self.nlp, {"x0": theta, "p": np.r_[phi, mask], **bounds})
+            solved = self._run(theta, np.r_[phi, mask], lbg, ubg)
             iterations += solved.iterations
             candidate = self._result(solved.x, solved.success, solved.status)
             # a failed re-solve never replaces a success; among successes the lower cost wins
@@ -249,6 +250,27 @@ class LightPlacement:
             best, more = self._step_inside(best, best.azimuth if azimuth is None else phi)
             iterations += more
         return dataclasses.replace(best, iterations=iterations, time_s=time.perf_counter() - t0)
+
+    def _run(self, theta0: Array, p: Array, lbg: Array, ubg: Array) -> Solve:
+        """The NLP from ``theta0`` with the capture margins (joints :data:`~optlight.planning.nlp.LIMIT_MARGIN`
+        inside their limits, environment rows ≥ ``CAPTURE_SLACK``). Where IPOPT fails from ``theta0``,
+        the NLP without the margins, whose feasible set is larger, then the one with them from its
+        solution; where the margins leave no light on the azimuth (the relaxed optimum sits where a
+        row meets a joint limit: point_light's landmark 1), the relaxed solution, on its rows' bounds,
+        which the trajectory NLP (rows ≥ 0) still accepts."""
+        margined = {"p": p, "lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
+        solved = run(self.nlp, {"x0": theta0, **margined})
+        if solved.success:
+            return solved
+        relaxed_lbg = lbg.copy()
+        relaxed_lbg[ZENITH_ROW + 1 :] = np.minimum(relaxed_lbg[ZENITH_ROW + 1 :], 0.0)
+        relaxed = {"p": p, "lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": relaxed_lbg, "ubg": ubg}
+        first = run(self.nlp, {"x0": theta0, **relaxed})
+        if not first.success:
+            return dataclasses.replace(solved, iterations=solved.iterations + first.iterations)
+        second = run(self.nlp, {"x0": first.x, **margined})
+        kept = second if second.success else first
+        return dataclasses.replace(kept, iterations=solved.iterations + first.iterations + second.iterations)
 
     def conditioning(self, theta: ArrayLike) -> float:
         """σ_min/σ_max of the 5-D light task Jacobian at θ (the generalized IK's: rows 0–4 of
