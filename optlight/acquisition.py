@@ -18,8 +18,9 @@ dataset folder.
    through the same :func:`optlight.solve`;
 5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
    least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails (the planner's
-   error is the status; the first plan's error is raised). The best plan by measured cost is the
-   result; the first plan is the open loop's.
+   error is the status; the first plan's error is raised). The best plan by measured cost, by the
+   same rule (a later round replaces it only at least ``tolerance`` below), is the result; the first
+   plan is the open loop's.
 
 With a folder camera the images exist only for the plan the robot ran: the loop captures that
 plan, calibrates, re-plans, and stops with status ``awaiting captures`` and the next plan
@@ -146,7 +147,11 @@ class Iteration:
             "measured_per_capture": self.measured,
             "modelled_per_capture": self.modelled,
             "landmarks": [
-                {"zenith_deg": float(np.rad2deg(z)), "azimuth_deg": float(np.rad2deg(a)), "light_position_m": c.light_position}
+                {
+                    "zenith_deg": float(np.rad2deg(z)),
+                    "azimuth_deg": float(np.rad2deg(a)),
+                    "light_position_m": c.light_position,
+                }
                 for z, a, c in zip(zenith, azimuth, self.captures, strict=True)
             ],
             "wall_time_s": self.wall_time_s,
@@ -172,8 +177,16 @@ class Acquisition:
 
     @property
     def best(self) -> Iteration:
-        """The round with the lowest measured cost."""
-        return min(self.iterations, key=lambda it: it.measured_cost)
+        """The round the loop keeps: the first, replaced by a later one only when its measured cost is
+        at least ``[loop] tolerance`` (relative) below the kept round's — the rule that stops the loop.
+        A smaller decrease is within what the camera's noise makes: keeping such a round was measured
+        worse than the open loop when captured again (bench_loop's light_2cm_off, ratio 1.00006)."""
+        tolerance = self.setup.problem.loop.tolerance
+        kept = self.iterations[0]
+        for it in self.iterations[1:]:
+            if it.measured_cost < kept.measured_cost * (1.0 - tolerance):
+                kept = it
+        return kept
 
     @property
     def open_loop(self) -> Iteration:
@@ -196,7 +209,9 @@ class Acquisition:
             "best_iteration": best.index,
             "open_loop_measured_cost": first.measured_cost,
             "best_measured_cost": best.measured_cost,
-            "ratio_best_over_open_loop": best.measured_cost / first.measured_cost if first.measured_cost > 0 else None,
+            "ratio_best_over_open_loop": best.measured_cost / first.measured_cost
+            if first.measured_cost > 0
+            else None,
             "wall_time_per_iteration_s": [it.wall_time_s for it in self.iterations],
         }
 
@@ -207,7 +222,9 @@ class Acquisition:
         fig = Figure(figsize=(5.5, 3.6))
         ax = fig.add_subplot()
         k = [it.index for it in self.iterations]
-        ax.plot(k, [it.measured_cost for it in self.iterations], "o-", label=f"measured ({self.camera} camera)")
+        ax.plot(
+            k, [it.measured_cost for it in self.iterations], "o-", label=f"measured ({self.camera} camera)"
+        )
         ax.plot(k, [it.modelled_cost for it in self.iterations], "s--", label="modelled (the planning model)")
         ax.axvline(self.best.index, color="0.7", lw=0.8)
         ax.set_xlabel("iteration (0 = open loop)")
@@ -235,7 +252,9 @@ class Acquisition:
         - ``measured_cost.png``: :meth:`figure`;
         - ``next/``: with a folder camera awaiting captures, the next plan's results folder.
         """
-        return write_folder(folder, lambda staging: [staging / f for f in self._write(staging)], overwrite=overwrite)
+        return write_folder(
+            folder, lambda staging: [staging / f for f in self._write(staging)], overwrite=overwrite
+        )
 
     def _write(self, root: Path) -> list[str]:
         files: list[str] = []
@@ -246,8 +265,12 @@ class Acquisition:
         calibration = self.calibration
         if calibration is not None:
             scene = self.setup.scene
-            (root / "calibration.json").write_text(json.dumps(json_safe(calibration.to_dict()), indent=2) + "\n")
-            np.save(root / "albedo_factor.npy", scene.to_image(calibration.albedo_factor) + ~scene.gbuffer.mask)
+            (root / "calibration.json").write_text(
+                json.dumps(json_safe(calibration.to_dict()), indent=2) + "\n"
+            )
+            np.save(
+                root / "albedo_factor.npy", scene.to_image(calibration.albedo_factor) + ~scene.gbuffer.mask
+            )
             files += ["calibration.json", "albedo_factor.npy"]
             if calibration.normals is not None and calibration.normals_valid is not None:
                 h, w = scene.gbuffer.mask.shape
@@ -271,7 +294,9 @@ class Acquisition:
             "versions": library_versions(),
             "files": [*files, "acquisition.json"],
         }
-        (root / "acquisition.json").write_text(json.dumps(json_safe(document), indent=2, allow_nan=False) + "\n")
+        (root / "acquisition.json").write_text(
+            json.dumps(json_safe(document), indent=2, allow_nan=False) + "\n"
+        )
         files.append("acquisition.json")
         return files
 
@@ -283,7 +308,9 @@ def _write_captures_folder(folder: Path, iteration: Iteration) -> list[str]:
     folder.mkdir(parents=True, exist_ok=True)
     positions = np.array([c.light_position for c in iteration.captures])
     directions = positions - plan.setup.sphere.center
-    directions = plan.scene.camera.to_camera_frame(directions / np.linalg.norm(directions, axis=1, keepdims=True))
+    directions = plan.scene.camera.to_camera_frame(
+        directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    )
     write_captures(
         folder / "captures.csv",
         plan.trajectory,
@@ -354,7 +381,9 @@ def acquire(
             error = str(e)
         notify(i, "calibrate", 1, 1)
         rounds.append(
-            Iteration(i, plan, tuple(captures), measured, modelled, calibration, time.perf_counter() - start, error)
+            Iteration(
+                i, plan, tuple(captures), measured, modelled, calibration, time.perf_counter() - start, error
+            )
         )
         cost = float(np.mean(measured))
         if i > 0 and not cost < best * (1.0 - spec.tolerance):
@@ -428,7 +457,9 @@ def photometric_servo(
 
     first = reach(zenith, azimuth, None)
     if first is None:
-        raise OptlightError(f"the robot cannot put the light at zenith {np.rad2deg(zenith):.1f}°, azimuth {np.rad2deg(azimuth):.1f}°")
+        raise OptlightError(
+            f"the robot cannot put the light at zenith {np.rad2deg(zenith):.1f}°, azimuth {np.rad2deg(azimuth):.1f}°"
+        )
     q, position = first
     capture = camera.capture(position, 0)
     cost = judge.objective.numpy(capture.image.ravel()[index])
@@ -472,5 +503,7 @@ def servo_functions(model: Setup) -> tuple[ca.Function, ca.Function]:
     zenith, azimuth = ca.MX.sym("zenith"), ca.MX.sym("azimuth")
     v = ca.MX.sym("v", scene.gbuffer.size)
     image = scene.luminance(smooth=True)(sphere_position(model.sphere, zenith, azimuth), v)
-    jacobian = ca.Function("dI_dangles", [zenith, azimuth, v], [ca.jacobian(image, ca.vertcat(zenith, azimuth))])
+    jacobian = ca.Function(
+        "dI_dangles", [zenith, azimuth, v], [ca.jacobian(image, ca.vertcat(zenith, azimuth))]
+    )
     return gradient, jacobian
