@@ -110,6 +110,13 @@ def modelled_costs(model: Setup, positions: ArrayLike) -> Array:
     return np.array([model.objective.numpy(model.scene.pixels(a)) for a in np.asarray(positions, float)])
 
 
+def improves(cost: float, kept: float, tolerance: float) -> bool:
+    """A measured ``cost`` is an improvement on the ``kept`` one when it is at least ``tolerance``
+    (relative) below it: the loop's stop rule and its choice of plan. A smaller decrease is within
+    what the camera's noise makes."""
+    return cost < kept * (1.0 - tolerance)
+
+
 @dataclass(frozen=True, eq=False)
 class Iteration:
     """One round of the loop: the ``plan`` (made on the model of the previous round's calibration,
@@ -184,7 +191,7 @@ class Acquisition:
         tolerance = self.setup.problem.loop.tolerance
         kept = self.iterations[0]
         for it in self.iterations[1:]:
-            if it.measured_cost < kept.measured_cost * (1.0 - tolerance):
+            if improves(it.measured_cost, kept.measured_cost, tolerance):
                 kept = it
         return kept
 
@@ -386,7 +393,7 @@ def acquire(
             )
         )
         cost = float(np.mean(measured))
-        if i > 0 and not cost < best * (1.0 - spec.tolerance):
+        if i > 0 and not improves(cost, best, spec.tolerance):
             status = "stopped improving"
             break
         best = min(best, cost)
