@@ -111,12 +111,13 @@ def test_plane_point_light_falls_off_as_inverse_square(tmp_path: Path) -> None:
 # ------------------------------------------------------------------ box on a plane, cast shadow
 
 
-def test_box_on_plane_casts_the_predicted_shadow(tmp_path: Path) -> None:
+@pytest.mark.parametrize("model", ["directional", "point"])
+def test_box_on_plane_casts_the_predicted_shadow(tmp_path: Path, model: str) -> None:
     half, edge = 0.15, 0.06
     box = trimesh.creation.box(extents=(edge, edge, edge))
     box.apply_translation((0, 0, edge / 2))  # [−e/2, e/2]² × [0, e] in the sphere frame
     path = export(trimesh.util.concatenate([plane_mesh(half), box]), tmp_path / "box.ply")
-    problem = make_problem(object={"kind": "mesh", "path": path}, light={"cast_shadows": True})
+    problem = make_problem(object={"kind": "mesh", "path": path}, light={"cast_shadows": True, "model": model})
     scene = Scene.from_problem(problem, 96, 96)
     origins, dirs = pixel_rays(scene)
     lo, hi = np.array([-edge / 2, -edge / 2, 0.0]), np.array([edge / 2, edge / 2, edge])
@@ -139,12 +140,16 @@ def test_box_on_plane_casts_the_predicted_shadow(tmp_path: Path) -> None:
     def image(flags: np.ndarray) -> np.ndarray:
         return scene.to_image(flags.astype(float)).astype(bool)
 
-    for zenith, azimuth in [(0.8, 0.5), (0.6, 3.5)]:
-        a = scene.sphere.position(zenith, azimuth)
-        l_s = to_sphere_frame(scene, a) / scene.sphere.radius
-        in_shadow, _ = hits_box(q, np.broadcast_to(l_s, q.shape))
+    lights = scene.sphere.position(np.array([0.8, 0.6]), np.array([0.5, 3.5]))
+    masks = scene.visibility(lights)  # both lights' rays in one call
+    assert masks.shape == (2, scene.gbuffer.size)
+    for a, mask in zip(lights, masks, strict=True):
+        a_s = to_sphere_frame(scene, a)  # the box lies between the plane and the light: any hit shadows
+        towards = np.broadcast_to(a_s, q.shape) - q if model == "point" else np.broadcast_to(a_s, q.shape)
+        in_shadow, _ = hits_box(q, towards / np.linalg.norm(towards, axis=1, keepdims=True))
         expected = image(on_plane & in_shadow)
-        got = image(on_plane & (scene.visibility(a) == 0))
+        got = image(on_plane & (mask == 0))
+        assert np.array_equal(mask, scene.visibility(a))
         assert expected.sum() > 100  # a real shadow, not a few pixels
         boundary = binary_dilation(expected) & ~binary_erosion(expected)
         boundary |= binary_dilation(~image(on_plane)) & image(on_plane)  # next to the box or the edge

@@ -130,10 +130,11 @@ class Scene:
 
     def visibility(self, light_position: ArrayLike) -> Array:
         """Cast-shadow visibility v (P,) in {0., 1.} for a light at ``light_position`` (world, m),
-        from shadow rays (:func:`optlight.scene.gbuffer.shadow_visibility`); all ones when
-        ``light.cast_shadows`` is false."""
+        or (S, P) for S lights (S, 3), from shadow rays
+        (:func:`optlight.scene.gbuffer.shadow_visibility`); all ones when ``light.cast_shadows`` is
+        false."""
         if not self.light.cast_shadows:
-            return np.ones(self.gbuffer.size)
+            return np.ones((*np.shape(light_position)[:-1], self.gbuffer.size))
         return shadow_visibility(
             self._caster,
             self.gbuffer,

@@ -127,7 +127,8 @@ def shadow_visibility(
     center: ArrayLike,
     epsilon: float,
 ) -> Array:
-    """Cast-shadow visibility v_i ∈ {0, 1} of each G-buffer point for a light at ``light_position``.
+    """Cast-shadow visibility v_i ∈ {0, 1} of each G-buffer point for a light at ``light_position``
+    (3,), shape (P,); or for several lights (S, 3), shape (S, P), their rays cast in one call.
 
     The shadow ray starts at p_i + ε n_i (ε = ``epsilon``, m, clears the surface despite float32)
     and goes towards the light: directional, along l = (a − O)/|a − O| with O = ``center``, to
@@ -137,24 +138,26 @@ def shadow_visibility(
     max(0, n·l) (attached shadow), and v models cast shadows only.
     """
     a = np.asarray(light_position, float)
+    lights = a.reshape(-1, 3)
     p, n = gbuffer.points, gbuffer.normals
     if model == "directional":
-        axis = a - np.asarray(center, float)
-        d = np.broadcast_to(axis / np.linalg.norm(axis), p.shape)
-        dist = np.full(len(p), np.inf)
+        axis = lights - np.asarray(center, float)
+        d = np.broadcast_to((axis / np.linalg.norm(axis, axis=1, keepdims=True))[:, None], (len(lights), *p.shape))
+        dist = np.full((len(lights), len(p)), np.inf)
     else:
-        to_light = a - p
-        dist = np.linalg.norm(to_light, axis=1)
-        d = to_light / dist[:, None]
-    lit = np.flatnonzero(np.einsum("ij,ij->i", n, d) > 0)
-    origins = p[lit] + epsilon * n[lit]
+        to_light = lights[:, None] - p
+        dist = np.linalg.norm(to_light, axis=2)
+        d = to_light / dist[..., None]
+    lit = np.nonzero(np.einsum("ij,sij->si", n, d) > 0)
+    origins = p[lit[1]] + epsilon * n[lit[1]]
     dirs = np.ascontiguousarray(d[lit])
+    # one call for all lights: the per-call cost of the ray caster is ~40 % of a 64-px search render
     tri = caster.intersects_first(origins, dirs)
     blocked = tri >= 0
     if model == "point" and blocked.any():
         idx = np.flatnonzero(blocked)
         t = _plane_distance(caster.mesh, tri[idx], origins[idx], dirs[idx])
-        blocked[idx] = t < dist[lit[idx]] - epsilon
-    visibility = np.ones(len(p))
-    visibility[lit[blocked]] = 0.0
-    return visibility
+        blocked[idx] = t < dist[lit[0][idx], lit[1][idx]] - epsilon
+    visibility = np.ones((len(lights), len(p)))
+    visibility[lit[0][blocked], lit[1][blocked]] = 0.0
+    return visibility.reshape(*a.shape[:-1], len(p))
