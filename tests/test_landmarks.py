@@ -96,7 +96,7 @@ def test_never_worse_than_the_sweep(
     assert result.histograms.shape == (len(result), problem.objective.bins)
 
 
-def test_nlp_built_once_and_progress_reported(problem: Problem, scene: Scene, monkeypatch) -> None:
+def test_azimuth_mode_builds_no_nlp_and_reports_progress(problem: Problem, monkeypatch) -> None:
     built = []
     real = ca.nlpsol
 
@@ -108,9 +108,25 @@ def test_nlp_built_once_and_progress_reported(problem: Problem, scene: Scene, mo
     calls: list[tuple[int, int]] = []
     small = small_problem(count=3, seeds=2)
     out = find_landmarks(Setup.from_problem(small), progress=lambda done, total: calls.append((done, total)))
-    assert built == ["zenith_refiner"]
+    assert built == []  # the zenith search is a 1-D Brent search on the NumPy objective
     assert calls == [(1, 3), (2, 3), (3, 3)]
-    assert out.iterations > 0
+    assert out.iterations > 0  # objective evaluations of the zenith searches
+    free = find_landmarks(Setup.from_problem(small_problem(mode="free", count=2, min_separation_deg=20.0)))
+    assert built == ["cap_refiner"] and len(free) == 2  # free mode's 2-D NLP, built once for both
+
+
+def test_zenith_search_finds_a_minimum_off_the_sweep_grid(setup: Setup) -> None:
+    """The refinement alone, against a dense scan of the same fixed-mask objective on its bracket."""
+    search = lm_module.ZenithSearch(setup.search_scene, setup.search_objective, setup.sphere)
+    azimuth, lo, hi = 0.0, math.radians(REF_ZENITH_DEG - 2.0), math.radians(REF_ZENITH_DEG + 1.0)
+    mask = setup.search_scene.visibility(setup.sphere.position(math.radians(REF_ZENITH_DEG), azimuth))
+    solved = search.solve(azimuth, mask, (lo, hi))
+    assert solved.success and solved.status == "converged" and 5 <= solved.iterations <= 40
+    scan = np.linspace(lo, hi, 301)
+    costs = setup.search_objective.numpy_batch(
+        np.stack([setup.search_scene.pixels(a, mask) for a in setup.sphere.position(scan, azimuth)])
+    )
+    assert abs(solved.x[0] - scan[np.argmin(costs)]) <= lm_module.REFINE_TOL + (hi - lo) / 300
 
 
 def test_free_mode_keeps_the_separation(scene: Scene) -> None:

@@ -8,23 +8,28 @@ Azimuth mode (the paper's). For ``M`` equally spaced azimuths ``φ_j = 2πj/M`` 
 light at ``a(θ, φ_j)``. ``D`` is multimodal in θ, so per azimuth:
 
 1. *sweep*: ``D`` at the zeniths ``θ_min, θ_min + Δ, …, θ_max`` (``Δ ≤ sweep_step_deg``), NumPy
-   renderer with shadow rays at every sample;
+   renderer with shadow rays at every sample (one ray-caster call per azimuth);
 2. *seeds*: the ``seeds`` lowest local minima of the sweep;
-3. *refine*: one IPOPT solve per seed of the 1-D NLP ``min_θ D̃(θ; φ, v)`` with bounds, where
-   ``D̃`` is the differentiable model (:meth:`Scene.luminance`, smooth max and clip) and the cast
-   shadows ``v`` are a fixed visibility mask: shadow rays at the seed; when the mask at the
-   solution differs from the one solved with, the NLP is solved again from the solution with the
-   mask there (at most :data:`VISIBILITY_ROUNDS` solves per seed);
+3. *refine*: per seed, a bounded Brent search (:class:`ZenithSearch`) of ``D`` over the seed's
+   bracket, the zeniths between its two sweep neighbours, with the cast shadows ``v`` a fixed
+   visibility mask: shadow rays at the seed; when the mask at the solution differs from the one
+   searched with, the search runs again with the mask there (at most :data:`VISIBILITY_ROUNDS`
+   searches per seed). ``D`` is a smooth function of θ on a bracket of a sweep minimum once the mask
+   is fixed, so a derivative-free 1-D search converges in ~10 renders;
 4. *select*: the best sweep sample and the refined zeniths are scored with the NumPy renderer and
    shadow rays; the lowest wins, so the landmark is never worse than the best sweep sample;
-5. *polish* (only when the search resolution is below the camera's): a bounded Brent search of the
-   objective at the camera's resolution within ±0.5° of the winner (mask fixed there), then the
-   sweep sample, the winner and the polished zenith are scored at the camera's resolution with
-   shadow rays and the lowest is the landmark. This removes what the lower resolution and the
-   smooth model shift the minimiser by (~0.1–0.2° on the default face).
+5. *polish* (only when the search resolution is below the camera's): one parabolic step of the
+   objective at the camera's resolution around the winner (mask fixed there, three points
+   :data:`POLISH_STEP` apart and the parabola's vertex), then the sweep sample, the winner and the
+   polish's points are scored at the camera's resolution and the lowest is the landmark. This
+   removes what the lower resolution shifts the minimiser by (~0.1–0.2° on the default face).
 
-The NLP (a CasADi Function and one ``nlpsol``) is built once and reused for every seed and azimuth:
-the azimuth and the mask are its parameters ``p = (φ, v)``.
+Why not an NLP per seed, or one batched solve across azimuths: a render and its objective are
+compute-bound NumPy (the P×K histogram kernel), so batching evaluations across azimuths saves only
+Python overhead, while each IPOPT solve of the 1-D NLP cost ~8 iterations of a CasADi graph three
+times slower to evaluate than the NumPy objective, with its gradient. Measured on the default face
+(``benchmarks/bench_landmarks.py``): the time goes to the sweep's shadow rays and to the
+camera-resolution work, which the steps above keep to a few renders per azimuth.
 
 Free mode. The ``count`` best light positions on the allowed cap, pairwise at least
 ``min_separation_deg`` apart: a 2-D sweep over a (θ, φ) grid, then greedily, best sample first,
@@ -69,13 +74,14 @@ from optlight.spec import SolverSpec
 Array = NDArray[np.float64]
 Progress = Callable[[int, int], None]
 
-#: Largest number of IPOPT solves per seed: the first with the mask at the seed, then one more each
-#: time the mask at the solution differs from the one the solve used.
+#: Largest number of solves per seed: the first with the mask at the seed, then one more each time
+#: the mask at the solution differs from the one the solve used.
 VISIBILITY_ROUNDS = 3
-#: Half width (rad) of the zenith bracket of the camera-resolution polish around the search's best.
-POLISH_HALF_WIDTH = math.radians(0.5)
-#: Zenith tolerance (rad) of the polish, 0.006°.
-POLISH_TOL = 1e-4
+#: Zenith tolerance (rad) of the azimuth-mode refinement at the search resolution, 0.06°: the
+#: camera-resolution polish moves the zenith by about that much anyway.
+REFINE_TOL = 1e-3
+#: Spacing (rad) of the three points of the camera-resolution polish, 0.25°.
+POLISH_STEP = math.radians(0.25)
 
 
 @dataclass(frozen=True)
@@ -83,12 +89,14 @@ class Landmark:
     """One landmark: light at ``zenith``, ``azimuth`` (rad) = ``position`` (world, m).
 
     ``cost``: the objective there (NumPy renderer, shadow rays, the camera's resolution).
-    ``status``: "refined" when an IPOPT solution won, "polished" when the camera-resolution polish
-    did, "sweep" when a sweep sample did; "placed" when the robot could not reach the search's
+    ``status``: "refined" when a refinement's solution won, "polished" when the camera-resolution
+    polish did, "sweep" when a sweep sample did; "placed" when the robot could not reach the search's
     landmark and the joint-space placement (:mod:`optlight.planning.placement`) moved it along its
     azimuth to the best light the robot reaches.
-    ``solver_status``: IPOPT's return status of the winning solve (of the first solve when the sweep
-    won; "" when no solve ran). ``iterations``: IPOPT iterations over all solves of this landmark.
+    ``solver_status``: the return status of the winning solve (IPOPT's in free mode, "converged" or
+    scipy's message for the zenith search of azimuth mode; of the first solve when the sweep won; ""
+    when no solve ran). ``iterations``: over all solves of this landmark, IPOPT iterations (free
+    mode) or objective evaluations of the zenith search (azimuth mode).
     ``time_s``: wall time of this landmark's own work (azimuth mode: its sweep included; free mode:
     its refinement, the shared 2-D sweep excluded)."""
 
@@ -160,7 +168,7 @@ class LandmarkSet:
 
     @property
     def iterations(self) -> int:
-        """IPOPT iterations over all landmarks."""
+        """Solver iterations (see :class:`Landmark`) over all landmarks."""
         return sum(lm.iterations for lm in self.landmarks)
 
 
@@ -195,7 +203,8 @@ def sweep_costs(
 
 def _sweep_azimuth(scene: Scene, objective: Objective, zenith: Array, azimuth: float) -> Array:
     positions = scene.sphere.position(zenith, azimuth)
-    return objective.numpy_batch(np.stack([scene.pixels(a) for a in positions]))
+    masks = scene.visibility(positions)
+    return objective.numpy_batch(np.stack([scene.pixels(a, v) for a, v in zip(positions, masks, strict=True)]))
 
 
 def zenith_grid(sphere: LightSphere, step: float) -> Array:
@@ -215,34 +224,31 @@ def local_minima(values: ArrayLike) -> NDArray[np.intp]:
 
 
 # --------------------------------------------------------------------------------------------
-# The NLPs, built once
+# The refinements: a 1-D search (azimuth mode), a 2-D NLP built once (free mode)
 # --------------------------------------------------------------------------------------------
 
 
-class ZenithRefiner:
-    """The 1-D NLP of azimuth mode, built once: ``min_θ D̃(a(θ, φ), v)`` s.t. ``θ_min ≤ θ ≤ θ_max``
-    (``sphere``'s allowed range), parameters ``p = (φ, v)`` (azimuth, rad; visibility mask (P,))."""
+class ZenithSearch:
+    """The refinement of azimuth mode: ``min_{θ ∈ [lo, hi]} D(a(θ, φ), v)`` by bounded Brent search
+    (golden section with parabolic steps, :func:`scipy.optimize.minimize_scalar`, zenith tolerance
+    :data:`REFINE_TOL`), ``D`` the objective of the NumPy render at ``scene``'s resolution with the
+    visibility mask ``v`` fixed."""
 
-    def __init__(self, scene: Scene, objective: Objective, solver: SolverSpec, sphere: LightSphere) -> None:
+    def __init__(self, scene: Scene, objective: Objective, sphere: LightSphere) -> None:
+        self.scene = scene
+        self.objective = objective
         self.sphere = sphere
-        zenith = ca.MX.sym("zenith")
-        p = ca.MX.sym("p", 1 + scene.gbuffer.size)
-        cost = objective.function(sphere_position(self.sphere, zenith, p[0]), p[1:])
-        self.nlp = ca.nlpsol(
-            "zenith_refiner", "ipopt", {"x": zenith, "p": p, "f": cost}, ipopt_options(solver)
-        )
 
-    def solve(self, zenith: float, azimuth: float, visibility: Array) -> Solve:
-        """Refine from ``zenith`` along ``azimuth`` (rad) with the mask ``visibility`` (P,)."""
-        return run(
-            self.nlp,
-            {
-                "x0": zenith,
-                "p": np.r_[azimuth, visibility],
-                "lbx": self.sphere.zenith_min,
-                "ubx": self.sphere.zenith_max,
-            },
-        )
+    def solve(self, azimuth: float, visibility: Array, bracket: tuple[float, float]) -> Solve:
+        """The zenith (rad) in ``bracket`` minimising ``D`` along ``azimuth`` (rad) with the mask
+        ``visibility`` (P,); ``iterations`` counts the objective's evaluations."""
+
+        def cost(zenith: float) -> float:
+            return self.objective.numpy(self.scene.pixels(self.sphere.position(zenith, azimuth), visibility))
+
+        result = minimize_scalar(cost, bounds=bracket, method="bounded", options={"xatol": REFINE_TOL})
+        status = "converged" if result.success else str(result.message)
+        return Solve(np.array([float(result.x)]), int(result.nfev), status, bool(result.success))
 
 
 class CapRefiner:
@@ -300,6 +306,10 @@ class _Candidate:
     solver_status: str = ""
 
 
+#: A candidate scored at the camera's resolution: (cost, pixels (P,), candidate).
+_Scored = tuple[float, Array, _Candidate]
+
+
 class _Search:
     """What both modes share: the camera-resolution scene and objective (reported costs), the search
     scene and objective (sweeps, NLPs, candidate scores), all from the built setup; the refinement of
@@ -345,19 +355,30 @@ class _Search:
             mask = new_mask
         return candidate, iterations, first_status
 
-    def polish(self, start: _Candidate, mask: Array) -> _Candidate:
-        """Bounded Brent minimisation of the objective at the camera's resolution over the zenith,
-        within :data:`POLISH_HALF_WIDTH` of ``start`` along its azimuth, with the visibility ``mask``
-        (P,) of ``start`` held fixed (the result is scored with its own shadow rays by :meth:`finish`)."""
-        azimuth = start.azimuth
+    def polish(self, start: _Candidate, cost: float, mask: Array) -> list[_Scored]:
+        """One parabolic step of the objective at the camera's resolution along ``start``'s azimuth,
+        with ``start``'s visibility ``mask`` (P,) held fixed: the objective at θ ± s
+        (s = :data:`POLISH_STEP`, each where it is allowed) and, when both are and the parabola
+        through them and (θ, ``cost``) is convex, at its vertex θ − s (f₊ − f₋) / (2 (f₊ − 2f + f₋)),
+        clipped to θ ± 2s and to the allowed zeniths. Returns those points, scored."""
+        theta, azimuth = start.zenith, start.azimuth
+        lo, hi = self.sphere.zenith_min, self.sphere.zenith_max
 
-        def cost(zenith: float) -> float:
-            return self.objective.numpy(self.scene.pixels(self.sphere.position(zenith, azimuth), mask))
+        def score(zenith: float) -> _Scored:
+            pixels = self.scene.pixels(self.sphere.position(zenith, azimuth), mask)
+            value = self.objective.numpy(pixels)
+            return value, pixels, _Candidate(zenith, azimuth, value, "polished", start.solver_status)
 
-        lo = max(self.sphere.zenith_min, start.zenith - POLISH_HALF_WIDTH)
-        hi = min(self.sphere.zenith_max, start.zenith + POLISH_HALF_WIDTH)
-        result = minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": POLISH_TOL})
-        return _Candidate(float(result.x), azimuth, float(result.fun), "polished", start.solver_status)
+        sides = {z: score(z) for z in (theta - POLISH_STEP, theta + POLISH_STEP) if lo <= z <= hi}
+        if len(sides) < 2:
+            return list(sides.values())
+        f_minus, f_plus = (s[0] for s in sides.values())
+        curvature = f_plus - 2 * cost + f_minus
+        if curvature <= 0:
+            return list(sides.values())
+        vertex = theta - POLISH_STEP * (f_plus - f_minus) / (2 * curvature)
+        vertex = float(np.clip(vertex, max(lo, theta - 2 * POLISH_STEP), min(hi, theta + 2 * POLISH_STEP)))
+        return [*sides.values(), score(vertex)]
 
     def finish(
         self, index: int, sample: _Candidate, best: _Candidate, iterations: int, t0: float, polish: bool
@@ -367,7 +388,7 @@ class _Search:
         result of :meth:`polish` from the best) are scored again at the camera's, shadow rays
         included, and the lowest wins."""
 
-        def score(c: _Candidate, mask: Array | None = None) -> tuple[float, Array, _Candidate]:
+        def score(c: _Candidate, mask: Array | None = None) -> _Scored:
             pixels = self.scene.pixels(self.sphere.position(c.zenith, c.azimuth), mask)
             return self.objective.numpy(pixels), pixels, c
 
@@ -379,7 +400,7 @@ class _Search:
             if sample != best:
                 scored.append(score(sample))
             if polish:
-                scored.append(score(self.polish(best, mask)))
+                scored.extend(self.polish(best, scored[0][0], mask))
         cost, pixels, winner = min(scored, key=lambda s: s[0])
         azimuth = float(np.mod(winner.azimuth, 2 * np.pi))
         lm = Landmark(
@@ -486,7 +507,7 @@ def distinct_landmarks(landmarks: Sequence[Landmark], tolerance: float) -> tuple
 
 def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
     spec = search.spec
-    refiner = ZenithRefiner(search.search, search.search_objective, search.solver, search.sphere)
+    refiner = ZenithSearch(search.search, search.search_objective, search.sphere)
     zenith = _sweep_zeniths(search, math.radians(spec.sweep_step_deg))
     allowed = np.flatnonzero(zenith >= search.sphere.zenith_min)
     azimuth = 2 * np.pi * np.arange(spec.count) / spec.count
@@ -502,7 +523,8 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         ]
         best, iterations, first_status = seeds[0], 0, ""
         for seed in seeds[: spec.seeds]:
-            refined, its, status = search.refine(seed, refiner.solve)
+            bracket = _bracket(zenith, seed.zenith, search.sphere)
+            refined, its, status = search.refine(seed, lambda _t, p, v, b=bracket: refiner.solve(p, v, b))
             iterations += its
             first_status = first_status or status
             if refined is not None and refined.cost < best.cost:
@@ -515,6 +537,15 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         if progress is not None:
             progress(j + 1, spec.count)
     return landmarks, histograms, CostGrid(zenith, azimuth, costs)
+
+
+def _bracket(zenith: Array, seed: float, sphere: LightSphere) -> tuple[float, float]:
+    """The zeniths (rad) between the sweep neighbours of the sweep sample ``seed`` (a local minimum
+    of the sweep, so the objective's minimum near it lies there), within ``sphere``'s allowed range."""
+    i = int(np.searchsorted(zenith, seed))
+    lo = zenith[max(i - 1, 0)]
+    hi = zenith[min(i + 1, zenith.size - 1)]
+    return max(float(lo), sphere.zenith_min), min(float(hi), sphere.zenith_max)
 
 
 def _sweep_zeniths(search: _Search, step: float) -> Array:
