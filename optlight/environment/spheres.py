@@ -6,7 +6,7 @@ joint frame. The fit (:func:`fit_spheres`) covers the *surface* of the body's co
 1. the surface of each piece's convex hull (what the exact checks use) is subdivided to triangles
    with edges ≤ :data:`EDGE_M`;
 2. its vertices are cut into k slabs of equal width along the principal axis (largest variance);
-   each slab gets a near-smallest ball holding its points (:func:`_enclosing_ball`);
+   each slab gets a near-smallest ball holding its points (:func:`_enclosing_balls`);
 3. every triangle whose three corners are not inside one sphere grows the sphere that needs the
    least growth until they are. A sphere is convex, so then every triangle — the whole surface — is
    inside the union of spheres: clearance of the spheres ≥ m implies clearance of the surface ≥ m.
@@ -24,6 +24,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull
 
 Array = NDArray[np.float64]
 
@@ -56,30 +57,36 @@ def _subdivided(surfaces: list[trimesh.Trimesh]) -> tuple[Array, NDArray[np.int6
     return np.concatenate(verts), np.concatenate(tris).astype(np.int64)
 
 
-def _slab_spheres(points: Array, k: int) -> tuple[Array, Array]:
-    """At most k spheres over equal-width slabs of the points along their principal axis (step 2)."""
+def _slabs(points: Array, k: int) -> list[NDArray[np.intp]]:
+    """The indices of the points in each of k equal-width slabs along their principal axis (step 2);
+    a slab without points (a gap in the shape) is left out, so it gets no sphere."""
     mean = points.mean(axis=0)
     _, _, vt = np.linalg.svd(points - mean, full_matrices=False)
     s = (points - mean) @ vt[0]
     edges = np.linspace(s.min(), s.max(), k + 1)
     slab = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, k - 1)
-    centers, radii = [], []
-    for i in np.unique(slab):  # a slab without points (a gap in the shape) gets no sphere
-        c, r = _enclosing_ball(points[slab == i])
-        centers.append(c)
-        radii.append(r)
-    return np.array(centers), np.array(radii)
+    return [np.flatnonzero(slab == i) for i in np.unique(slab)]
 
 
-def _enclosing_ball(points: Array) -> tuple[Array, float]:
-    """A ball holding all points, near the smallest one: Bădoiu–Clarkson, c ← c + (p_far − c)/(i + 1)
-    for :data:`BALL_ITERATIONS` steps (radius within ~1/sqrt(iterations) of the optimum); the radius
-    is the exact distance to the farthest point from the final centre."""
-    c = points.mean(axis=0)
+def _enclosing_balls(point_sets: list[Array]) -> tuple[Array, Array]:
+    """For each set of points, a ball holding them all, near the smallest one: Bădoiu–Clarkson,
+    c ← c + (p_far − c)/(i + 1) from the mean for :data:`BALL_ITERATIONS` steps (radius within
+    ~1/sqrt(iterations) of the optimum); each radius is the exact distance to the farthest point from
+    the final centre. Centres (n, 3), radii (n,).
+
+    The farthest point from any centre is a vertex of the points' convex hull, so the steps search
+    the hull's vertices only (Qhull, joggled so that flat slabs still give one), and all sets step
+    together (their vertices padded with copies of their first): the sequential steps cost one set's."""
+    extremes = [p[ConvexHull(p, qhull_options="QJ").vertices] if len(p) > 4 else p for p in point_sets]
+    width = max(len(e) for e in extremes)
+    x = np.stack([np.concatenate([e, np.repeat(e[:1], width - len(e), axis=0)]) for e in extremes])
+    c = np.stack([p.mean(axis=0) for p in point_sets])
+    rows = np.arange(len(point_sets))
     for i in range(1, BALL_ITERATIONS + 1):
-        d = points - c
-        c = c + d[np.argmax(np.einsum("ij,ij->i", d, d))] / (i + 1)
-    return c, float(np.linalg.norm(points - c, axis=1).max())
+        d = x - c[:, None]
+        c = c + d[rows, np.argmax(np.einsum("nij,nij->ni", d, d), axis=1)] / (i + 1)
+    radii = np.array([np.linalg.norm(p - ci, axis=1).max() for p, ci in zip(point_sets, c, strict=True)])
+    return c, radii
 
 
 def _cover_triangles(points: Array, triangles: NDArray[np.int64], centers: Array, radii: Array) -> Array:
@@ -99,13 +106,17 @@ def fit_spheres(surfaces: list[trimesh.Trimesh], max_spheres: int) -> tuple[Arra
     """Centres (k, 3) and radii (k,) of spheres covering the convex hulls of ``surfaces`` (all in
     one frame, m): the k ≤ ``max_spheres`` with the least Σ r³ (module docstring)."""
     points, triangles = _subdivided(surfaces)
+    slabs = [_slabs(points, k) for k in range(1, max_spheres + 1)]
+    centers, radii = _enclosing_balls([points[idx] for fit in slabs for idx in fit])
     best: tuple[float, Array, Array] | None = None
-    for k in range(1, max_spheres + 1):
-        centers, radii = _slab_spheres(points, k)
-        radii = _cover_triangles(points, triangles, centers, radii)
-        volume = float(np.sum(radii**3))
+    start = 0
+    for fit in slabs:
+        c, r = centers[start : start + len(fit)], radii[start : start + len(fit)]
+        start += len(fit)
+        r = _cover_triangles(points, triangles, c, r)
+        volume = float(np.sum(r**3))
         if best is None or volume < best[0]:
-            best = (volume, centers, radii)
+            best = (volume, c, r)
     assert best is not None
     return best[1], best[2]
 
