@@ -112,10 +112,11 @@ def h_residual(position: Any, rotation: Any, center: Any, radius: Any) -> Any:
     """The light constraints h1–h3 (DESIGN §3): h = R_Lᵀ (O − a_L) − [0, 0, b]; zero iff the
     light is on the sphere and its +z axis passes through O. Units: metres.
 
-    The one definition of h: NumPy arrays give a (3,) array; when any argument is a CasADi
-    expression (SX/MX, e.g. the symbolic light pose or a parametrised centre) a 3×1 expression."""
+    The one definition of h: NumPy arrays give a (3,) array, or (k, 3) for k poses (positions
+    (k, 3), rotations (k, 3, 3)); when any argument is a CasADi expression (SX/MX, e.g. the symbolic
+    light pose or a parametrised centre) a 3×1 expression."""
     if any(isinstance(x, ca.SX | ca.MX) for x in (position, rotation, center, radius)):
         o = center if isinstance(center, ca.SX | ca.MX) else ca.DM(np.asarray(center, float))
         return rotation.T @ (o - position) - ca.vertcat(0.0, 0.0, radius)
-    r = np.asarray(rotation, float)
-    return r.T @ (np.asarray(center, float) - np.asarray(position, float)) - np.array([0.0, 0.0, radius])
+    to_center = np.asarray(center, float) - np.asarray(position, float)
+    return np.einsum("...ji,...j->...i", np.asarray(rotation, float), to_center) - np.array([0.0, 0.0, radius])

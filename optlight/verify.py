@@ -311,17 +311,13 @@ def verify_trajectory(
     path_needed = planned_path is not None
     pose_at = np.union1d(on_path, in_dwell) if path_needed else in_dwell
     positions = np.full((t.size, 3), np.nan)
-    h_norm = np.full(t.size, np.nan)
-    aim = np.full(t.size, np.nan)
+    rotations = np.full((t.size, 3, 3), np.nan)
     for k in pose_at:
-        a, r = light_pose(q[k])
-        a, r = np.asarray(a, float), np.asarray(r, float)
-        positions[k] = a
-        if dwell_of[k] >= 0:
-            h_norm[k] = np.linalg.norm(h_residual(a, r, sphere.center, sphere.radius))
-            to_center = sphere.center - a
-            axis = r[:, 2]
-            aim[k] = math.atan2(np.linalg.norm(np.cross(axis, to_center)), float(axis @ to_center))
+        positions[k], rotations[k] = light_pose(q[k])
+    a, r = positions[in_dwell], rotations[in_dwell]
+    h_norm = np.linalg.norm(h_residual(a, r, sphere.center, sphere.radius), axis=1)
+    axis, to_center = r[:, :, 2], sphere.center - a
+    aim = np.arctan2(np.linalg.norm(np.cross(axis, to_center), axis=1), np.einsum("ij,ij->i", axis, to_center))
     landmark_dist = np.linalg.norm(positions[in_dwell] - landmarks[dwell_of[in_dwell]], axis=1)
 
     def dwell_check(name: str, values: Array, limit: float, unit: str, what: str) -> None:
@@ -337,8 +333,8 @@ def verify_trajectory(
             ),
         )
 
-    dwell_check("h", h_norm[in_dwell], tol.h_m, "m", "|h|")
-    dwell_check("aim", aim[in_dwell], tol.aim_rad, "rad", "aiming angle")
+    dwell_check("h", h_norm, tol.h_m, "m", "|h|")
+    dwell_check("aim", aim, tol.aim_rad, "rad", "aiming angle")
     dwell_check("landmark", landmark_dist, tol.landmark_m, "m", "distance to the landmark")
 
     if planned_path is not None:
