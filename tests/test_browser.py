@@ -52,6 +52,14 @@ PROJECT_JS = """(points) => {
 }"""
 
 
+#: Seek the animation to t (s); the light node's position (meshcat world frame) and the clip's length.
+SEEK_JS = """(t) => {
+  viewer.animator.seek(t);
+  const light = viewer.scene_tree.find(["meshcat", "light"]).object;
+  return [light.position.toArray(), viewer.animator.duration];
+}"""
+
+
 def drawn_fraction(shot: np.ndarray) -> float:
     """Fraction of the pixels that differ from meshcat's background, a vertical gradient (constant
     along each row): pixels away from their row's median. The top rows (meshcat's controls bar) are
@@ -106,6 +114,10 @@ def test_offline_preview_draws_the_robot(tmp_path):
     with_robot = Preview(*args, **lit).save_html(tmp_path / "with_robot.html")
     without_robot = Preview(*args, **lit, show_robot=False).save_html(tmp_path / "without_robot.html")
 
+    # Scrubbing the animation puts the light where the kinematics has it then (keyframes
+    # interpolated by three.js itself), and the clip lasts the trajectory's duration.
+    scrub_times = [0.37 * trajectory.duration, 0.81 * trajectory.duration]
+
     # Where the robot is at t = 0: the origins of its frames (links, joints, flange, light).
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, robot.to_pin(trajectory.sample(0.0)[0][0]))
@@ -117,10 +129,15 @@ def test_offline_preview_draws_the_robot(tmp_path):
             page = browser.new_page(viewport=VIEWPORT)
             shot_robot = open_preview(page, with_robot)
             corners = np.array(page.evaluate(PROJECT_JS, robot_points))
+            scrubbed = {t: page.evaluate(SEEK_JS, t) for t in scrub_times}
             page = browser.new_page(viewport=VIEWPORT)
             shot_empty = open_preview(page, without_robot)
         finally:
             browser.close()
+    for t, (position, duration) in scrubbed.items():
+        assert duration == pytest.approx(trajectory.duration, abs=1e-4)
+        expected, _ = robot.light_pose(trajectory.sample(t)[0][0])
+        np.testing.assert_allclose(position, expected, atol=1e-3)
     Image.fromarray(shot_robot.astype(np.uint8)).save(tmp_path / "with_robot.png")
     Image.fromarray(shot_empty.astype(np.uint8)).save(tmp_path / "without_robot.png")
 

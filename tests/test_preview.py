@@ -9,23 +9,28 @@ import urllib.request
 
 import matplotlib
 import numpy as np
+import pinocchio as pin
 import psutil
 import pytest
 import trimesh
 import umsgpack
 import zmq
 from conftest import reduced_problem
+from scipy.spatial.transform import Rotation, Slerp
 
 from optlight.errors import OptlightError
 from optlight.geometry import great_circle
 from optlight.planning.timing import time_parameterize
 from optlight.robot import load_robot
 from optlight.scene import Scene
-from optlight.spec import LightSpec, problem_from_dict
+from optlight.spec import LightSpec, load_problem, problem_from_dict
 from optlight.viz.preview import (
+    KEY_TOLERANCE_M,
+    KEY_TOLERANCE_RAD,
     Preview,
     animation_times,
     camera_corners,
+    select_keyframes,
     vertex_shading,
 )
 from optlight.viz.server import MeshcatServer
@@ -40,10 +45,41 @@ def scene_commands(html: str) -> list[dict]:
     return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(match.group(1))]
 
 
+TYPED_ARRAYS = {
+    "Float32Array": np.float32,
+    "Uint32Array": np.uint32,
+    "Uint16Array": np.uint16,
+    "Uint8Array": np.uint8,
+    "Int8Array": np.int8,
+}
+
+
 def packed_array(attribute: dict) -> np.ndarray:
-    """A numpy array packed by meshcat (``pack_numpy_array``)."""
-    dtype = {"Float32Array": np.float32, "Uint32Array": np.uint32}[attribute["type"]]
-    return np.frombuffer(attribute["array"].data, dtype).reshape(-1, attribute["itemSize"])
+    """A three.js buffer attribute as the viewer reads it: normalized integers as [0, 1] (unsigned)
+    or [−1, 1] (signed), as three.js's ``BufferAttribute`` does."""
+    dtype = np.dtype(TYPED_ARRAYS[attribute["type"]]).newbyteorder("<")
+    values = np.frombuffer(attribute["array"].data, dtype).reshape(-1, attribute["itemSize"])
+    if attribute["normalized"]:
+        return np.maximum(values / np.iinfo(dtype).max, -1.0)
+    return values
+
+
+def float32s(ext) -> np.ndarray:
+    """A Float32Array msgpack extension (meshcat's code 0x17) as a numpy array."""
+    assert ext.type == 0x17
+    return np.frombuffer(ext.data, "<f4").astype(float)
+
+
+def tracks(animation: dict) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """node path → track name → (times in s, values (K, 3 or 4)) of a set_animation command."""
+    out: dict[str, dict[str, tuple[np.ndarray, np.ndarray]]] = {}
+    for item in animation["animations"]:
+        clip = item["clip"]
+        for track in clip["tracks"]:
+            times = float32s(track["times"]) / clip["fps"]
+            values = float32s(track["values"]).reshape(len(times), -1)
+            out.setdefault(item["path"], {})[track["name"]] = (times, values)
+    return out
 
 
 def objects(commands: list[dict]) -> dict[str, dict]:
@@ -127,7 +163,7 @@ def test_object_colours_agree_with_the_renderer(model):
     sphere, whose pixel normals are exact: at each object pixel the nearest vertex's colour may
     differ only by the shading change over the angle between the two normals and, for a point light,
     over the distance δ between the points (direction: δ/r; falloff f = (b/r)²: 2δ/r relative):
-    |Δ| ≤ g·ρ·E·f·(1 + 3δ/r)·(Δangle + 3δ/r)/s."""
+    |Δ| ≤ g·ρ·E·f·(1 + 3δ/r)·(Δangle + 3δ/r)/s, plus half a step of the 8-bit colours sent."""
     problem = problem_from_dict(
         {"object": {"kind": "sphere", "radius_m": 0.08}, "light": {"cast_shadows": False, "model": model}}
     )
@@ -147,7 +183,7 @@ def test_object_colours_agree_with_the_renderer(model):
     )
     falloff = (scene.sphere.radius / np.linalg.norm(a - gb.points, axis=1)) ** 2 if model == "point" else 1.0
     growth = falloff * (1 + 3 * offset)
-    bound = light.gain * gb.albedo * light.power * growth * (angle + 3 * offset) / light.saturation + 1e-6
+    bound = light.gain * gb.albedo * light.power * growth * (angle + 3 * offset) / light.saturation + 0.5 / 255 + 1e-6
     assert np.all(np.abs(colors[nearest] - rendered) <= bound)
     assert np.median(np.abs(colors[nearest] - rendered)) < 0.02
 
@@ -170,27 +206,95 @@ def test_frustum_reaches_the_image_corners(plan):
     np.testing.assert_allclose(v, [-0.5, -0.5, camera.height - 0.5, camera.height - 0.5], atol=1e-9)
 
 
-def test_animation_frames_duration_and_poses(commands, preview, plan):
+def test_animation_covers_the_trajectory_and_ends_at_its_poses(commands, preview, plan):
     _, robot, _, _, _, trajectory = plan
     animation = next(c for c in commands if c["type"] == "set_animation")
-    n_frames = int(np.floor(trajectory.duration * 30)) + 1
-    n_frames += trajectory.duration * 30 - (n_frames - 1) > 1e-9
-    clips = {a["path"]: a["clip"] for a in animation["animations"]}
+    clips = tracks(animation)
     assert set(clips) == {"/meshcat/light"} | {
         f"/meshcat/robot/visuals/{g.name}" for g in robot.geometry_model("visual").geometryObjects
     }
-    for clip in clips.values():
-        assert clip["fps"] == 30
-        for track in clip["tracks"]:
-            assert len(track["keys"]) == n_frames == len(preview.frame_times)
-            assert track["keys"][-1]["time"] / clip["fps"] == pytest.approx(trajectory.duration)
-    # The light's last key is where the robot's kinematics put it at the end of the trajectory.
-    light = {t["name"]: t["keys"] for t in clips["/meshcat/light"]["tracks"]}
-    end, _ = robot.light_pose(trajectory.sample(trajectory.duration)[0][0])
-    np.testing.assert_allclose(light[".position"][-1]["value"], end, atol=1e-9)
-    start, _ = robot.light_pose(trajectory.sample(0.0)[0][0])
-    np.testing.assert_allclose(light[".position"][0]["value"], start, atol=1e-9)
+    for node in clips.values():
+        assert set(node) == {".position", ".quaternion"}
+        for name, (times, values) in node.items():
+            # from the start to the end of the trajectory, in order, at frames of the 30 fps grid
+            assert times[0] == 0.0 and times[-1] == pytest.approx(trajectory.duration, abs=1e-5)
+            assert np.all(np.diff(times) > 0)
+            np.testing.assert_allclose(times, preview.key_times, atol=1e-5)
+            assert values.shape == (len(times), 3 if name == ".position" else 4)
+    assert set(preview.key_times) <= set(preview.frame_times)
+    assert len(preview.frame_times) == len(animation_times(trajectory.duration, 30))
+    # The light's first and last keys are where the robot's kinematics put it at the ends.
+    light = clips["/meshcat/light"][".position"][1]
+    for key, t in ((0, 0.0), (-1, trajectory.duration)):
+        np.testing.assert_allclose(light[key], robot.light_pose(trajectory.sample(t)[0][0])[0], atol=1e-6)
     assert animation["options"] == {"play": True, "repetitions": 1}
+
+
+def world_poses(robot, visual, theta) -> dict[str, tuple[np.ndarray, Rotation]]:
+    """node path → world position and rotation of the light frame and every visual mesh, by
+    pinocchio's forward kinematics (the reference the animation is checked against)."""
+    data, geometry_data = robot.model.createData(), visual.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.to_pin(theta))
+    pin.updateGeometryPlacements(robot.model, data, visual, geometry_data)
+    light = data.oMf[robot.light_frame_id]
+    out = {"/meshcat/light": (light.translation.copy(), Rotation.from_matrix(light.rotation))}
+    for k, obj in enumerate(visual.geometryObjects):
+        placement = geometry_data.oMg[k]
+        out[f"/meshcat/robot/visuals/{obj.name}"] = (
+            placement.translation.copy(),
+            Rotation.from_matrix(placement.rotation),
+        )
+    return out
+
+
+def test_animation_follows_the_kinematics(commands, preview, plan):
+    """Interpolated as the viewer does (positions linearly, rotations by slerp), the kept keyframes
+    put the light and every link where pinocchio's kinematics does: within the keyframe tolerance at
+    every frame of the 30 fps grid, and within 1 mm and 0.2° at random times between frames."""
+    _, robot, _, _, _, trajectory = plan
+    clips = tracks(next(c for c in commands if c["type"] == "set_animation"))
+    visual = robot.geometry_model("visual")
+    rng = np.random.default_rng(3)
+    frames = preview.frame_times
+    checks = [(frames, KEY_TOLERANCE_M + 1e-5, KEY_TOLERANCE_RAD + 1e-4)]
+    checks.append((rng.uniform(0.0, trajectory.duration, 40), 1e-3, np.radians(0.2)))
+    assert len(preview.key_times) < len(frames)  # keyframes were dropped: the check is not trivial
+    for times, tol_m, tol_rad in checks:
+        thetas = trajectory.sample(times)[0]
+        reference = [world_poses(robot, visual, theta) for theta in thetas]
+        for node, node_tracks in clips.items():
+            key_t, key_p = node_tracks[".position"]
+            position = np.stack([np.interp(times, key_t, key_p[:, c]) for c in range(3)], axis=1)
+            key_q = node_tracks[".quaternion"][1]
+            rotation = Slerp(key_t, Rotation.from_quat(key_q))(np.clip(times, key_t[0], key_t[-1]))
+            expected_p = np.array([r[node][0] for r in reference])
+            expected_r = Rotation.concatenate([r[node][1] for r in reference])
+            assert np.linalg.norm(position - expected_p, axis=1).max() <= tol_m, node
+            assert (rotation * expected_r.inv()).magnitude().max() <= tol_rad, node
+
+
+def test_keyframes_keep_what_interpolation_needs():
+    t = np.arange(61) / 30
+    identity = np.tile([0.0, 0.0, 0.0, 1.0], (61, 1, 1))
+    still = np.zeros((61, 1, 3))
+    line = np.stack([t, 2 * t, 0 * t], axis=1)[:, None, :]
+    assert list(select_keyframes(t, still, identity, 1e-3, 1e-3)) == [0, 60]
+    assert list(select_keyframes(t, line, identity, 1e-3, 1e-3)) == [0, 60]
+    # a circle of radius 0.2 m at π rad/s, facing its centre: kept keys whose chords sag by at most
+    # 3 mm, and a uniform turn, which slerp restores exactly
+    angle = np.pi * t
+    circle = np.stack([0.2 * np.cos(angle), 0.2 * np.sin(angle), 0 * t], axis=1)[:, None, :]
+    facing = Rotation.from_rotvec(np.outer(angle, [0.0, 0.0, 1.0])).as_quat()[:, None, :]
+    keys = select_keyframes(t, circle, facing, 3e-3, np.radians(0.1))
+    assert keys[0] == 0 and keys[-1] == 60 and 5 < len(keys) < 40
+    between = np.stack([np.interp(t, t[keys], circle[keys, 0, c]) for c in range(3)], axis=1)
+    assert np.linalg.norm(between - circle[:, 0], axis=1).max() <= 3e-3
+    # an accelerating turn in place: the rotation tolerance alone keeps keys
+    spin = Rotation.from_rotvec(np.outer(0.5 * np.pi * t**2, [0.0, 0.0, 1.0]))
+    keys = select_keyframes(t, still, spin.as_quat()[:, None, :], 1e-3, np.radians(1.0))
+    assert 2 < len(keys) < 61
+    restored = Slerp(t[keys], spin[keys])(t)
+    assert (restored * spin.inv()).magnitude().max() <= np.radians(1.0) + 1e-9
 
 
 def test_animation_times():
@@ -315,3 +419,35 @@ def test_at_best_landmark_holds_the_light_there() -> None:
     assert preview.reached
     # within the IK tolerance |e|² < 1e-9 (m²)
     assert np.linalg.norm(robot.light_pose(preview.theta)[0] - best.position) < np.sqrt(1e-9)
+
+
+def test_default_sized_preview_stays_under_5_mb():
+    """The issue's budget for preview.html, on a preview the size of the default problem's: its
+    scene (the 101,760-triangle face, kept whole), the Panda, 36 landmarks and a 36-landmark tour of
+    about 28 s (dwells of 0.5 s). The robot's meshes, decimated, take under 1.2 MB of it."""
+    problem = load_problem("default")
+    scene = Scene.from_problem(problem, width=32, height=32)
+    robot = load_robot(problem)
+    m = problem.landmarks.count
+    azimuths = np.linspace(0.0, 2 * np.pi, m + 1)
+    landmarks = scene.sphere.position(np.full(m, 0.4), azimuths[:-1])
+    # a loop in joint space through 36 configurations, like the default plan's tour around the cap
+    phase = azimuths[:, None] + np.arange(7) * np.pi / 7
+    thetas = robot.theta_ref + 0.25 * np.sin(phase)
+    segments = [np.linspace(a, b, 8) for a, b in zip(thetas[:-1], thetas[1:], strict=True)]
+    trajectory = time_parameterize(segments, robot.velocity_limit, robot.acceleration_limit, dwell_s=0.5)
+    assert 20.0 < trajectory.duration < 40.0
+    preview = Preview(scene, robot, landmarks, np.arange(m, dtype=float), landmarks, trajectory)
+    html = preview.static_html()
+    size = len(html.encode("utf-8"))
+    commands = scene_commands(html)
+    robot_bytes = sum(
+        len(umsgpack.packb(c)) * 4 / 3 for c in commands if c["path"].startswith("/meshcat/robot/")
+    )
+    index = packed_array(objects(commands)["/meshcat/object"]["object"]["geometries"][0]["data"]["index"])
+    assert index.size == 3 * len(scene.mesh.faces)  # the face, whole
+    assert robot_bytes < 1.2e6, f"robot meshes: {robot_bytes / 1e6:.2f} MB"
+    assert size <= 5_000_000, f"preview.html: {size / 1e6:.2f} MB"
+    animation = tracks(next(c for c in commands if c["type"] == "set_animation"))
+    times = animation["/meshcat/light"][".position"][0]
+    assert times[-1] == pytest.approx(trajectory.duration, abs=1e-5)

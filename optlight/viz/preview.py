@@ -13,10 +13,12 @@ viewer's JavaScript, the meshes and the animation are inlined) or served live
 
 What is drawn (node paths under ``/meshcat``, see the ``*_NODE`` constants):
 
-- ``robot``: pinocchio's ``MeshcatVisualizer`` with the robot's visual meshes; UR robots with their
-  collision meshes (their COLLADA visuals render broken in meshcat, DESIGN §7);
-- ``object``: the object mesh, unlit, coloured by the luminance model of DESIGN §4 evaluated per
-  vertex (no cast shadows) for the light at ``light_position``, as a grey level (white = saturation);
+- ``robot``: pinocchio's ``MeshcatVisualizer`` with the robot's visual meshes, decimated for display
+  with their material colours (:mod:`optlight.viz.meshes`); UR robots with their collision meshes
+  (their COLLADA visuals render broken in meshcat, DESIGN §7);
+- ``object``: the object mesh (decimated to :data:`OBJECT_MESH_FACES` triangles when larger), unlit,
+  coloured by the luminance model of DESIGN §4 evaluated per vertex (no cast shadows) for the light at
+  ``light_position``, as a grey level (white = saturation);
 - ``light_sphere``: the sphere of radius b around O, transparent;
 - ``landmarks/NNN``: one small sphere per landmark, coloured by its cost (viridis, low = dark);
 - ``path``: a line through the light positions of the planned path;
@@ -24,9 +26,12 @@ What is drawn (node paths under ``/meshcat``, see the ``*_NODE`` constants):
   object's depth);
 - ``light``: the light frame (animated), a bulb at its origin and a cone along its +z axis.
 
-With a trajectory, an animation (``fps`` frames per second, the last frame at the trajectory's
-end) moves the robot's links and the light; it plays once when the page opens and can be replayed
-or scrubbed in the viewer's "Animations" panel.
+With a trajectory, an animation moves the robot's links and the light from the trajectory's start to
+its end; it plays once when the page opens and can be replayed or scrubbed in the viewer's
+"Animations" panel. The viewer interpolates between keyframes (positions linearly, orientations by
+slerp), so of the poses at ``fps`` frames per second only the keyframes are kept that this
+interpolation needs to stay within :data:`KEY_TOLERANCE_M` and :data:`KEY_TOLERANCE_RAD` of every
+frame (:func:`select_keyframes`): a robot at rest during a dwell needs two.
 """
 
 from __future__ import annotations
@@ -47,16 +52,17 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 import umsgpack
-from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node
 from meshcat.servers.zmqserver import VIEWER_ROOT
 from numpy.typing import ArrayLike, NDArray
 from pinocchio.visualize import MeshcatVisualizer
+from scipy.spatial import cKDTree
 
 from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
 from optlight.scene.render import lambertian
 from optlight.spec import LightSpec
+from optlight.viz.meshes import CompactMeshGeometry, decimate, display_mesh, float32_ext
 from optlight.viz.server import MeshcatServer
 
 Array = NDArray[np.float64]
@@ -73,6 +79,14 @@ LIGHT_NODE = "light"
 _COLLISION_MESH_ROBOTS = re.compile(r"^ur\d+")
 _COLLISION_MESH_COLOR = (0.62, 0.66, 0.72, 1.0)
 _LIGHT_COLOR = 0xFFC800
+#: Triangles of the object on display; a larger mesh is decimated. The default face (101,760) is
+#: kept whole: decimated to 30,000 (0.5 MB of the page instead of 1.8 MB) its shading, what the
+#: preview shows of the plan, came out streaked, the eyes and lips smeared.
+OBJECT_MESH_FACES = 120_000
+#: How far (m) and how much (rad) the viewer's interpolation between the kept keyframes may move a
+#: link or the light from its pose at any frame: well below a pixel at the preview's scale.
+KEY_TOLERANCE_M = 5e-4
+KEY_TOLERANCE_RAD = np.radians(0.1)
 
 
 class SceneLike(Protocol):
@@ -117,7 +131,8 @@ class Preview:
     trajectory (default: the trajectory's start, else the robot's reference configuration);
     ``light_position`` (m), where the light is for the object's shading (default: the light frame's
     origin in the configuration shown); ``show_robot`` False leaves the robot's meshes out (the
-    light is still placed by its kinematics); ``fps``, the animation's frame rate.
+    light is still placed by its kinematics); ``fps``, the rate (frames/s) of the poses the
+    animation's keyframes are chosen from.
     """
 
     def __init__(
@@ -161,10 +176,13 @@ class Preview:
             if light_position is None
             else np.asarray(light_position, float)
         )
-        #: Times (s) of the animation's frames; empty without a trajectory.
+        #: Times (s) of the frames the animation's keyframes are chosen from; empty without a trajectory.
         self.frame_times = (
             animation_times(trajectory.duration, self.fps) if trajectory is not None else np.zeros(0)
         )
+        #: Times (s) of the animation's keyframes, a subset of :attr:`frame_times` with its first and
+        #: last; empty without a trajectory.
+        self.key_times = np.zeros(0)
 
         self._recorder = _SceneRecorder()
         vis = meshcat.Visualizer(window=self._recorder)
@@ -251,16 +269,17 @@ class Preview:
         else:
             geometry, color = robot.geometry_model("visual"), None
         view = _RobotView(robot.model, None, geometry)
+        view.mesh_color = color
         view.initViewer(viewer=vis)
-        view.loadViewerModel(rootNodeName=ROBOT_NODE, visual_color=color)
+        view.loadViewerModel(rootNodeName=ROBOT_NODE)
         view.display(robot.to_pin(self.theta))
         return view
 
     def _add_object(self, vis: meshcat.Visualizer) -> None:
         scene = self.scene
         gray = vertex_shading(scene.mesh, scene.albedo, self.light_position, scene.light, scene.sphere)
-        colors = np.repeat(gray[:, None], 3, axis=1)
-        geometry = mg.TriangularMeshGeometry(scene.mesh.vertices, scene.mesh.faces, color=colors)
+        mesh, gray = display_object(scene.mesh, gray, OBJECT_MESH_FACES)
+        geometry = CompactMeshGeometry(mesh.vertices, mesh.faces, np.repeat(gray[:, None], 3, axis=1))
         vis[OBJECT_NODE].set_object(geometry, mg.MeshBasicMaterial(vertexColors=True))
 
     def _add_sphere(self, vis: meshcat.Visualizer) -> None:
@@ -347,32 +366,70 @@ class Preview:
         vis["/Cameras/default/rotated/<object>"].set_property("position", [offset[0], offset[2], -offset[1]])
 
     def _add_animation(self, vis: meshcat.Visualizer, robot_view: _RobotView | None) -> None:
+        """The trajectory as one clip per moving node (the light, every robot mesh): the pose at
+        every frame of :attr:`frame_times` by the robot's kinematics, of which :func:`select_keyframes`
+        keeps what the viewer's interpolation needs; tracks hold float32 arrays (times in s)."""
         assert self.trajectory is not None
         thetas = self.trajectory.sample(self.frame_times)[0]
         model = self.robot.model
-        animation = Animation(default_framerate=self.fps)
-        for t, theta in zip(self.frame_times, thetas, strict=True):
-            frame = animation.at_frame(vis, float(t * self.fps))
+        nodes = [LIGHT_NODE]
+        poses: list[list[pin.SE3]] = []
+        for theta in thetas:
             pin.forwardKinematics(model, self._data, self.robot.to_pin(theta))
-            light = pin.updateFramePlacement(model, self._data, self.robot.light_frame_id)
-            frame[LIGHT_NODE].set_transform(light.homogeneous)
+            frame = [pin.updateFramePlacement(model, self._data, self.robot.light_frame_id).copy()]
             if robot_view is not None:
-                for node, placement in robot_view.placements(self._data):
-                    frame[node].set_transform(placement.homogeneous)
-        vis.set_animation(animation, play=True, repetitions=1)
+                placements = robot_view.placements(self._data)
+                nodes[1:] = [node for node, _ in placements]
+                frame += [placement.copy() for _, placement in placements]
+            poses.append(frame)
+        positions = np.array([[p.translation for p in frame] for frame in poses])
+        quaternions = continuous_quaternions(
+            np.array([[pin.Quaternion(p.rotation).coeffs() for p in frame] for frame in poses])
+        )
+        keys = select_keyframes(
+            self.frame_times, positions, quaternions, KEY_TOLERANCE_M, KEY_TOLERANCE_RAD
+        )
+        self.key_times = self.frame_times[keys]
+        times = float32_ext(self.key_times)
+
+        def clip(i: int) -> dict[str, Any]:
+            position, quaternion = float32_ext(positions[keys, i]), float32_ext(quaternions[keys, i])
+            return {
+                "fps": 1.0,  # three.js divides the key times by it: they are in seconds
+                "name": "default",
+                "tracks": [
+                    {"name": ".position", "type": "vector3", "times": times, "values": position},
+                    {"name": ".quaternion", "type": "quaternion", "times": times, "values": quaternion},
+                ],
+            }
+
+        animations = [{"path": vis[node].path.lower(), "clip": clip(i)} for i, node in enumerate(nodes)]
+        options = {"play": True, "repetitions": 1}
+        self._recorder.send(_Command({"type": "set_animation", "path": "", "animations": animations, "options": options}))
 
 
 class _RobotView(MeshcatVisualizer):
-    """pinocchio's ``MeshcatVisualizer``, reading STL meshes through trimesh: meshcat's STL loader
-    uses the file's facet normals, which some files (the UR collision meshes) leave at zero, and
-    such a mesh renders black. Sent as an indexed mesh, the viewer computes its normals."""
+    """pinocchio's ``MeshcatVisualizer``, reading mesh files through trimesh, decimated for display
+    with their normals (:mod:`optlight.viz.meshes`): sent whole, the Panda's COLLADA files alone
+    made a 15 MB page, and meshcat's own STL loader uses the file's facet normals, which some files
+    (the UR collision meshes) leave at zero: such a mesh renders black."""
+
+    #: RGBA for every mesh, or None for their files' material colours (else the URDF's colour).
+    mesh_color: tuple[float, ...] | None = None
 
     def loadMeshFromFile(self, geometry_object: pin.GeometryObject) -> Any:
-        """The meshcat geometry of a mesh file: STL through trimesh, other formats as pinocchio does."""
-        if Path(geometry_object.meshPath).suffix.lower() == ".stl":
-            mesh = trimesh.load_mesh(geometry_object.meshPath)
-            return mg.TriangularMeshGeometry(mesh.vertices, mesh.faces)
-        return super().loadMeshFromFile(geometry_object)
+        """The meshcat object of a mesh file: decimated for display, with its colours
+        (:func:`optlight.viz.meshes.display_mesh`), Phong-shaded."""
+        mesh = display_mesh(
+            geometry_object.meshPath,
+            scale=geometry_object.meshScale,
+            color=self.mesh_color,
+            default_color=geometry_object.meshColor,
+        )
+        return mg.Mesh(
+            CompactMeshGeometry(mesh.vertices, mesh.faces, mesh.colors, mesh.normals),
+            mg.MeshPhongMaterial(vertexColors=True),
+        )
 
     def placements(self, data: pin.Data) -> list[tuple[str, pin.SE3]]:
         """Viewer node and world placement of every mesh, for the joint placements in ``data``
@@ -390,6 +447,75 @@ def animation_times(duration: float, fps: float) -> Array:
     if duration - times[-1] > 1e-9:
         times = np.append(times, duration)
     return times
+
+
+def display_object(mesh: trimesh.Trimesh, values: ArrayLike, max_faces: int) -> tuple[trimesh.Trimesh, Array]:
+    """The object's mesh for display with ``values`` (V,) given per vertex of ``mesh``: the mesh itself
+    when it has at most ``max_faces`` triangles, else :func:`optlight.viz.meshes.decimate`'s, each
+    new vertex taking the value of the nearest original vertex. (Values computed on the decimated
+    mesh would follow its normals, which decimation leaves uneven: the shading shows streaks.)"""
+    values = np.broadcast_to(np.asarray(values, float), (len(mesh.vertices),))
+    if len(mesh.faces) <= max_faces:
+        return mesh, values
+    vertices, faces = decimate(mesh.vertices, mesh.faces, max_faces)
+    nearest = cKDTree(mesh.vertices).query(vertices)[1]
+    return trimesh.Trimesh(vertices, faces, process=False), values[nearest]
+
+
+def continuous_quaternions(quaternions: ArrayLike) -> Array:
+    """Unit quaternions (T, N, 4), one sequence over T per node, with signs flipped where needed so
+    that consecutive ones have a non-negative dot product (q and −q are the same rotation)."""
+    q = np.array(quaternions, float)
+    for t in range(1, len(q)):
+        q[t] *= np.where(np.einsum("nk,nk->n", q[t], q[t - 1]) < 0.0, -1.0, 1.0)[:, None]
+    return q
+
+
+def slerp(q0: Array, q1: Array, s: Array) -> Array:
+    """Spherical interpolation between unit quaternions q0, q1 (N, 4) at fractions s (T,): (T, N, 4),
+    along the shorter arc (as three.js's ``Quaternion.slerpFlat``)."""
+    dot = np.einsum("nk,nk->n", q0, q1)
+    q1 = np.where(dot[:, None] < 0.0, -q1, q1)
+    angle = np.arccos(np.clip(np.abs(dot), -1.0, 1.0))
+    sin = np.sin(angle)
+    near = sin < 1e-9  # (almost) the same rotation: linear interpolation is exact to first order
+    safe = np.where(near, 1.0, sin)
+    w0 = np.where(near, 1.0 - s[:, None], np.sin((1.0 - s[:, None]) * angle) / safe)
+    w1 = np.where(near, s[:, None], np.sin(s[:, None] * angle) / safe)
+    out = w0[..., None] * q0 + w1[..., None] * q1
+    return out / np.linalg.norm(out, axis=-1, keepdims=True)
+
+
+def select_keyframes(
+    times: ArrayLike, positions: ArrayLike, quaternions: ArrayLike, tolerance_m: float, tolerance_rad: float
+) -> NDArray[np.int64]:
+    """Indices of the frames to keep as keyframes, first and last included: greedily, each keyframe
+    is followed by the furthest frame such that interpolating every node between the two (positions
+    linearly, quaternions by :func:`slerp`, as the viewer does) stays within ``tolerance_m`` (m) and
+    ``tolerance_rad`` (rad) of each frame between them.
+
+    ``times`` (T,) increasing, ``positions`` (T, N, 3), ``quaternions`` (T, N, 4) unit."""
+    t = np.asarray(times, float)
+    p = np.asarray(positions, float)
+    q = np.asarray(quaternions, float)
+    keys = [0]
+    start = 0
+    while start < len(t) - 1:
+        end = start + 1
+        while end + 1 < len(t) and _interpolates(t, p, q, start, end + 1, tolerance_m, tolerance_rad):
+            end += 1
+        keys.append(end)
+        start = end
+    return np.asarray(keys, np.int64)
+
+
+def _interpolates(t: Array, p: Array, q: Array, i: int, j: int, tolerance_m: float, tolerance_rad: float) -> bool:
+    """Whether keyframes at frames i and j alone reproduce every frame between them within tolerance."""
+    s = (t[i + 1 : j] - t[i]) / (t[j] - t[i])
+    position_error = np.linalg.norm(p[i] + s[:, None, None] * (p[j] - p[i]) - p[i + 1 : j], axis=-1)
+    dot = np.abs(np.einsum("tnk,tnk->tn", slerp(q[i], q[j], s), q[i + 1 : j]))
+    angle_error = 2.0 * np.arccos(np.clip(dot, -1.0, 1.0))
+    return bool(position_error.max() <= tolerance_m and angle_error.max() <= tolerance_rad)
 
 
 def vertex_shading(
@@ -422,6 +548,18 @@ def _translation(position: ArrayLike) -> Array:
 def _rgb_int(rgba: Any) -> int:
     r, g, b = (int(round(255 * float(c))) for c in rgba[:3])
     return (r << 16) | (g << 8) | b
+
+
+class _Command:
+    """A meshcat command given as its message (``lower()`` returns it), for what meshcat-python's
+    command classes cannot say: an animation whose tracks are typed arrays."""
+
+    def __init__(self, message: dict[str, Any]) -> None:
+        self.message = message
+
+    def lower(self) -> dict[str, Any]:
+        """The message, as meshcat's command classes give theirs."""
+        return self.message
 
 
 class _SceneRecorder:
