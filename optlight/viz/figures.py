@@ -24,13 +24,34 @@ from optlight.scene import Scene
 
 #: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
 COST_FLOOR = 1e-12
+#: Contact sheet: width and height (in) of a cell; side (in) of the image in it, 0.05 in above the
+#: cell's bottom edge, centred across, its label above.
+CONTACT_SHEET_CELL_IN = (1.4, 1.55)
+CONTACT_SHEET_TILE_IN = 1.3
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
+    """Write ``fig`` as it is laid out (no ``bbox_inches="tight"``: measuring the drawn figure to
+    crop it draws it twice)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig.savefig(path, dpi=110)
     return path
+
+
+def _margins(fig: Figure, left: float, right: float, top: float, bottom: float, gap: float = 0.0) -> None:
+    """Place the subplots of a one-row figure with the margins and the gap between them given in
+    inches (where ``bbox_inches="tight"`` would have measured them)."""
+    width, height = fig.get_size_inches()
+    columns = len(fig.axes) or 1
+    axes_width = (width - left - right - (columns - 1) * gap) / columns
+    fig.subplots_adjust(
+        left=left / width,
+        right=1 - right / width,
+        top=1 - top / height,
+        bottom=bottom / height,
+        wspace=gap / axes_width,
+    )
 
 
 def _polar_axes(fig: Figure, r_max: float) -> PolarAxes:
@@ -130,25 +151,43 @@ def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[
         ax.set_xlim(0, 1)
     axes[0].set_ylabel("fraction of pixels")
     axes[0].legend(fontsize=8, frameon=False)
+    _margins(fig, left=0.7, right=0.15, top=0.55, bottom=0.5, gap=0.3)  # two-line titles on top
     return _save(fig, path)
 
 
 def plot_contact_sheet(landmarks: LandmarkSet, scene: Scene, path: str | Path, columns: int = 6) -> Path:
     """The camera image (NumPy renderer, shadow rays) at every landmark, in a grid, each labelled with
-    its index, zenith and azimuth."""
+    its index, zenith and azimuth.
+
+    Drawn as images and labels on one axes spanning the figure, laid out in inches
+    (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
+    36 landmarks (axes, ticks, titles and the tight bounding box of each), this about 0.3 s."""
     n = len(landmarks)
     cols = max(1, min(columns, n))
     rows = math.ceil(n / cols)
-    fig = Figure(figsize=(1.6 * cols, 1.75 * rows))
-    axes = fig.subplots(rows, cols, squeeze=False)
-    for ax in axes.ravel():
-        ax.axis("off")
-    for ax, lm in zip(axes.ravel(), landmarks.landmarks, strict=False):
-        ax.imshow(scene.render(lm.position), cmap="gray", vmin=0.0, vmax=scene.light.saturation)
-        ax.set_title(
-            f"#{lm.index} θ {math.degrees(lm.zenith):.1f}° φ {math.degrees(lm.azimuth):.0f}°", fontsize=7
+    (cell_w, cell_h), tile = CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN
+    positions = np.array([lm.position for lm in landmarks.landmarks]).reshape(-1, 3)
+    visibility = scene.visibility(positions)  # every light's shadow rays in one ray-caster call
+    fig = Figure(figsize=(cell_w * cols, cell_h * rows))
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.set_xlim(0.0, cell_w * cols)
+    ax.set_ylim(cell_h * rows, 0.0)  # inches from the top left corner
+    ax.axis("off")
+    for k, (lm, position, v) in enumerate(zip(landmarks.landmarks, positions, visibility, strict=True)):
+        x = cell_w * (k % cols) + 0.5 * (cell_w - tile)
+        y = cell_h * (k // cols) + cell_h - tile - 0.05
+        image = scene.to_image(scene.pixels(position, v))
+        ax.imshow(
+            image, cmap="gray", vmin=0.0, vmax=scene.light.saturation, extent=(x, x + tile, y + tile, y)
         )
-    fig.subplots_adjust(wspace=0.05, hspace=0.25)
+        ax.text(
+            x + 0.5 * tile,
+            y - 0.04,
+            f"#{lm.index} θ {math.degrees(lm.zenith):.1f}° φ {math.degrees(lm.azimuth):.0f}°",
+            fontsize=7,
+            ha="center",
+            va="bottom",
+        )
     return _save(fig, path)
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import cast
 
 import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.projections.polar import PolarAxes
 from numpy.typing import ArrayLike
@@ -29,7 +30,12 @@ def trajectory_figure(
     rate_hz: float = 200.0,
 ) -> Figure:
     """One row per joint, columns q (rad), q̇ (rad/s), q̈ (rad/s²) over t (s), sampled at
-    ``rate_hz`` plus the boundaries; limits dashed red, dwells (exposures) shaded, captures dotted."""
+    ``rate_hz`` plus the boundaries; limits dashed red, dwells (exposures) shaded, captures dotted.
+
+    Fixed margins (in inches) rather than a layout engine, and the dwells and captures of each axes
+    as one collection each rather than an artist per dwell: for 7 joints and 36 dwells the figure
+    took 3 s to build and save, most of it constrained layout measuring 21 axes and 1,500 artists;
+    now 0.8 s."""
     n = trajectory.dof
     lo, hi = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (lower, upper))
     vmax, amax = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (velocity_limit, acceleration_limit))
@@ -39,15 +45,31 @@ def trajectory_figure(
     bounds = ((lo, hi), (-vmax, vmax), (-amax, amax))
     titles = ("q [rad]", "q̇ [rad/s]", "q̈ [rad/s²]")
 
-    fig = Figure(figsize=(13, 1.7 * n + 0.8), layout="constrained")
+    width, height = 13.0, 1.7 * n + 0.8
+    fig = Figure(figsize=(width, height))
+    # margins (in): the joint names and tick labels on the left, the titles on top, t below
+    left, right, top, bottom, gap_x, gap_y = 0.85, 0.15, 0.75, 0.5, 0.55, 0.2
+    axes_w, axes_h = (width - left - right - 2 * gap_x) / 3, (height - top - bottom - (n - 1) * gap_y) / n
+    fig.subplots_adjust(
+        left=left / width,
+        right=1 - right / width,
+        top=1 - top / height,
+        bottom=bottom / height,
+        wspace=gap_x / axes_w,
+        hspace=gap_y / axes_h,
+    )
     axes = fig.subplots(n, 3, sharex=True, squeeze=False)
+    dwells = [[(a, 0.0), (b, 0.0), (b, 1.0), (a, 1.0)] for a, b in trajectory.landmark_intervals]
+    captures = [[(tc, 0.0), (tc, 1.0)] for tc in trajectory.capture_times]
     for j in range(n):
         for c in range(3):
             ax = axes[j, c]
-            for a, b in trajectory.landmark_intervals:
-                ax.axvspan(a, b, color="0.85", lw=0)
-            for tc in trajectory.capture_times:
-                ax.axvline(tc, color="0.6", lw=0.5, ls=":")
+            # x in data, y in axes coordinates: full height whatever the limits; not autoscaled
+            across = ax.get_xaxis_transform()
+            ax.add_collection(PolyCollection(dwells, facecolor="0.85", lw=0, transform=across), autolim=False)
+            ax.add_collection(
+                LineCollection(captures, colors="0.6", lw=0.5, linestyles=":", transform=across), autolim=False
+            )
             ax.plot(t, series[c][:, j], lw=1.0, color="C0")
             for limit in bounds[c]:
                 if np.isfinite(limit[j]):
@@ -60,7 +82,9 @@ def trajectory_figure(
                 ax.set_xlabel("t [s]")
     fig.suptitle(
         f"Timed trajectory: {trajectory.duration:.2f} s, {trajectory.capture_times.size} captures "
-        "(grey: dwells, red: limits)"
+        "(grey: dwells, red: limits)",
+        y=1 - 0.12 / height,
+        va="top",
     )
     return fig
 
@@ -130,5 +154,6 @@ def path_figure(
     ax3.set_zlabel("z (m)")
     ax3.set_box_aspect((1, 1, 1))
     ax3.set_title("world frame", fontsize=10)
-    fig.tight_layout()
+    # fixed margins: tight_layout measured every label of both axes first (a third of the time)
+    fig.subplots_adjust(left=0.06, right=0.92, top=0.88, bottom=0.13, wspace=0.2)
     return fig

@@ -1,0 +1,87 @@
+"""Figures drawn without layout engines: the contact sheet puts each landmark's image in its cell,
+the trajectory figure shades every dwell across the whole height of every axes."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+from PIL import Image
+
+from optlight.planning.timing import time_parameterize
+from optlight.robot import load_robot
+from optlight.scene import Scene
+from optlight.spec import problem_from_dict
+from optlight.viz.figures import CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN, plot_contact_sheet
+from optlight.viz.trajectory_figures import trajectory_figure
+
+
+def centroid(image: np.ndarray) -> np.ndarray:
+    """Brightness-weighted centre (x, y) of an image, as fractions of its width and height."""
+    h, w = image.shape
+    total = image.sum()
+    return np.array([(image.sum(axis=0) @ np.arange(w)) / total / w, (image.sum(axis=1) @ np.arange(h)) / total / h])
+
+
+def test_contact_sheet_puts_each_image_in_its_cell(tmp_path):
+    """A sphere lit from eight azimuths, drawn in rows of three: in the PNG, the brightness centre
+    of each cell's tile is where it is in that light's render (the tile is the right image, upright
+    and unmirrored)."""
+    problem = problem_from_dict({"object": {"kind": "sphere", "radius_m": 0.08}, "light": {"cast_shadows": False}})
+    scene = Scene.from_problem(problem, width=48, height=48)
+    azimuths = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+    positions = scene.sphere.position(np.full(8, 0.9), azimuths)
+    landmarks = _Sized(
+        SimpleNamespace(index=i, zenith=0.9, azimuth=a, position=p)
+        for i, (a, p) in enumerate(zip(azimuths, positions, strict=True))
+    )
+    sheet = plot_contact_sheet(landmarks, scene, tmp_path / "sheet.png", columns=3)  # type: ignore[arg-type]
+    png = np.asarray(Image.open(sheet).convert("L"), float)
+    dpi = png.shape[1] / (3 * CONTACT_SHEET_CELL_IN[0])
+    (cell_w, cell_h), tile = CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN
+    assert abs(png.shape[0] - math.ceil(8 / 3) * cell_h * dpi) <= 1  # three rows
+    for k, position in enumerate(positions):
+        x = (cell_w * (k % 3) + 0.5 * (cell_w - tile)) * dpi
+        y = (cell_h * (k // 3) + cell_h - tile - 0.05) * dpi
+        margin = 2  # pixels at the tile's edge may blend with the white around it
+        drawn = png[round(y) + margin : round(y + tile * dpi) - margin, round(x) + margin : round(x + tile * dpi) - margin]
+        expected = centroid(scene.render(position))
+        np.testing.assert_allclose(centroid(drawn), expected, atol=0.02, err_msg=f"cell {k}")
+    # the lights go round: their images' bright sides differ, so the comparison above discriminates
+    spread = np.ptp([centroid(scene.render(p)) for p in positions], axis=0)
+    assert spread.min() > 0.05
+
+
+class _Sized(list):
+    """Landmarks standing in for a LandmarkSet: what the contact sheet reads (``len``, ``.landmarks``)."""
+
+    @property
+    def landmarks(self) -> list:
+        return list(self)
+
+
+def test_trajectory_figure_shades_every_dwell_full_height(tmp_path):
+    robot = load_robot("panda")
+    knots = robot.theta_ref + np.linspace(0.0, 1.0, 4)[:, None] * np.array([0.4, 0.2, 0, -0.2, 0, 0.2, 0.4])
+    trajectory = time_parameterize([knots[:2], knots[1:3], knots[2:]], robot.velocity_limit, robot.acceleration_limit, dwell_s=0.3)
+    fig = trajectory_figure(
+        trajectory,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=robot.velocity_limit,
+        acceleration_limit=robot.acceleration_limit,
+    )
+    fig.savefig(tmp_path / "trajectory.png", dpi=fig.dpi)  # the pixels the transforms below give
+    png = np.asarray(Image.open(tmp_path / "trajectory.png").convert("L"), float)
+    height = png.shape[0]
+    assert len(fig.axes) == 3 * trajectory.dof
+    for ax in fig.axes:
+        bbox = ax.get_window_extent()
+        rows = height - np.linspace(bbox.y0 + 0.01 * bbox.height, bbox.y1 - 0.01 * bbox.height, 50)
+        for a, b in trajectory.landmark_intervals:
+            # a column a fifth into the dwell (off the capture line): grey from bottom to top, but
+            # where the curve or a limit line crosses it
+            x = round(ax.transData.transform((a + 0.2 * (b - a), 0.0))[0])
+            grey = np.abs(png[np.round(rows).astype(int), x] - 0.85 * 255) < 8
+            assert grey[:3].any() and grey[-3:].any() and grey.mean() > 0.85
