@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import json
 from pathlib import Path
 
@@ -10,7 +11,16 @@ import numpy as np
 import pytest
 
 from optlight.errors import UsageError, VerificationError
-from optlight.export import MANIFEST, json_safe, lp_direction, write_file, write_results
+from optlight.export import (
+    MANIFEST,
+    _yaml_float,
+    _yaml_rows,
+    joint_trajectory_text,
+    json_safe,
+    lp_direction,
+    write_file,
+    write_results,
+)
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.scene.camera import Camera
@@ -423,3 +433,33 @@ def test_verification_flags_acceleration_steps_and_names_joint_and_time() -> Non
     assert v.joint in NAMES and "q̈ jumps by" in v.message and f"t = {v.time_s - 1e-3:.4f}" in v.message
     # skipped when no jerk limit is given (a TOPPRA plan verified as before)
     assert "acceleration_continuity" in verify_trajectory(toppra, **{**args, "jerk_limit": None}).skipped
+
+
+def test_trajectory_files_are_the_text_of_value_by_value_formatting(tmp_path) -> None:
+    """trajectory.csv and joint_trajectory.yaml are formatted a row (csv) or an array (yaml) at a
+    time for speed; their text is the one formatting each value on its own gives (csv.writer with
+    f'{v:.12g}' and f'{t:.9f}', and _yaml_float), byte for byte: readers of the files see no change."""
+    traj, _ = plan()
+    rate = 250.0
+    t = traj.sample_times(rate)
+    q, qd, qdd = traj.sample(t)
+    reference = io.StringIO(newline="")
+    writer = csv.writer(reference)
+    writer.writerow(["t"] + [f"{p}_{n}" for p in ("q", "qd", "qdd") for n in NAMES])
+    for row_t, row in zip(t, np.hstack([q, qd, qdd]), strict=True):
+        writer.writerow([f"{row_t:.9f}", *(f"{v:.12g}" for v in row)])
+    traj.to_csv(tmp_path / "trajectory.csv", NAMES, rate_hz=rate)
+    assert (tmp_path / "trajectory.csv").read_bytes() == reference.getvalue().encode()
+
+    text = joint_trajectory_text(traj, NAMES, rate)
+    ns = np.unique(np.round(t * 1e9).astype(np.int64))
+    q, qd, qdd = traj.sample(ns / 1e9)
+    for k in (0, len(ns) // 2, len(ns) - 1):
+        for name, values in (("positions", q[k]), ("velocities", qd[k]), ("accelerations", qdd[k])):
+            assert f"{name}: [" + ", ".join(_yaml_float(v) for v in values) + "]\n" in text
+    assert text.count("positions: [") == len(ns)
+    # every form a float takes: exponent without a point (YAML would read '1e-05' as a string),
+    # with one, negative zero, the largest and smallest magnitudes
+    odd = np.array([[1e-05, 1.5e-07, -0.0, 0.1, 1e16, 123456789.123, 5e-324, -1.7976931348623157e308]])
+    assert _yaml_rows(odd) == ["[" + ", ".join(_yaml_float(v) for v in odd[0]) + "]"]
+    assert _yaml_rows(odd)[0].startswith("[1.0e-05, 1.5e-07, -0.0, 0.1, 1.0e+16, ")
