@@ -3,6 +3,7 @@ and normals against the meshes pinocchio loads; the disk cache; the compact pack
 
 from __future__ import annotations
 
+import coal
 import numpy as np
 import pytest
 import trimesh
@@ -20,10 +21,10 @@ def panda_visual():
 
 
 def pinocchio_surface(obj) -> trimesh.Trimesh:
-    """The mesh of a geometry object as pinocchio loaded it (assimp, into a coal BVH): a reader of
-    the file independent of trimesh's, with the mesh scale applied."""
-    bvh = obj.geometry
-    vertices = np.array(bvh.vertices()) * obj.meshScale
+    """The mesh of a geometry object as pinocchio reads it (coal's loader: assimp, into a BVH), with
+    the mesh scale applied: a reader of the file independent of trimesh's."""
+    bvh = coal.MeshLoader().load(obj.meshPath, np.asarray(obj.meshScale, float))
+    vertices = np.array(bvh.vertices())
     faces = np.array([[t[0], t[1], t[2]] for t in (bvh.tri_indices(i) for i in range(bvh.num_tris))])
     return trimesh.Trimesh(vertices, faces, process=False)
 

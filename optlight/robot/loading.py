@@ -66,6 +66,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
+import coal
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
@@ -389,13 +390,16 @@ class Robot:
     # ---------------------------------------------------------------- geometry
     def geometry_model(self, kind: Literal["collision", "visual"] = "collision") -> pin.GeometryModel:
         """Collision or visual geometry of the robot, consistent with :attr:`model`: locked joints
-        reduced away, base placement applied. Meshes are read from the URDF's packages."""
+        reduced away, base placement applied. Meshes are read from the URDF's packages; visual
+        meshes get axis-aligned bounding-box trees (they are drawn, never collided: the Panda's
+        build in 0.2 s instead of 0.5 s with the default OBBRSS trees)."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
         dirs = [str(p) for p in self.package_dirs]
+        loader = coal.MeshLoader(coal.BV_AABB) if kind == "visual" else None
         with quiet_stderr() as said:
             try:
                 full = pin.buildModelFromUrdf(str(self.urdf_path))
-                geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs)
+                geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs, mesh_loader=loader)
             except (RuntimeError, ValueError) as e:
                 detail = _first_error(said, e)
                 raise RobotError(
