@@ -451,3 +451,15 @@ def test_default_sized_preview_stays_under_5_mb():
     animation = tracks(next(c for c in commands if c["type"] == "set_animation"))
     times = animation["/meshcat/light"][".position"][0]
     assert times[-1] == pytest.approx(trajectory.duration, abs=1e-5)
+
+
+def test_a_mesh_trimesh_cannot_read_goes_to_pinocchios_loader(plan, monkeypatch):
+    scene, robot, landmarks, costs, path, _ = plan
+
+    def unreadable(*args, **kwargs):
+        raise ValueError("file type not supported")
+
+    monkeypatch.setattr("optlight.viz.preview.display_mesh", unreadable)
+    objs = objects(scene_commands(Preview(scene, robot, landmarks, costs, path).static_html()))
+    for g in robot.geometry_model("visual").geometryObjects:  # sent whole, as COLLADA text
+        assert objs[f"/meshcat/robot/visuals/{g.name}"]["object"]["object"]["format"] == "dae"
