@@ -101,6 +101,54 @@ def test_the_constrained_plan_clears_every_margin(constrained: optlight.Plan) ->
     assert exact.passed and exact.min_clearance_m >= env.margin
 
 
+def test_a_selection_of_clearance_rows_is_those_rows(constrained: optlight.Plan) -> None:
+    """The CasADi rows selected by index against the NumPy sphere model (pinocchio) at the plan's
+    knots, and near_rows against a threshold on the same values."""
+    env, robot = constrained.setup.environment, constrained.robot
+    assert env is not None
+    knots = constrained.nlp.theta[::7]
+    values = np.array([env.sphere_clearance(robot, theta)[0] for theta in knots])
+    near = env.near_rows(robot, knots, 0.15)
+    assert 0 < len(near) < values.shape[1]
+    assert list(near) == [i for i in range(values.shape[1]) if values[:, i].min() < 0.15]
+    selected = env.clearance_function(robot, near)
+    for theta, row in zip(knots, values, strict=True):
+        np.testing.assert_allclose(np.asarray(selected(theta)).ravel(), row[list(near)], atol=1e-9)
+
+
+def env_rows(plan: optlight.Plan) -> int:
+    """The number of clearance rows of a plan's environment."""
+    env = plan.setup.environment
+    assert env is not None
+    return int(env.clearance_function(plan.robot).size1_out(0))
+
+
+def test_rows_left_out_that_the_solution_breaks_join_the_nlp(
+    constrained: optlight.Plan, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With no row near enough to start with (a negative distance), the first solve goes through the
+    obstacles; the rows it breaks join and the knots come out clear, as with every row."""
+    from optlight.planning import trajectory
+
+    solves: list[int] = []
+    real = trajectory.TrajectoryOptimizer.solve
+
+    def counting(self: trajectory.TrajectoryOptimizer, *args: object) -> trajectory.TrajectoryNLPResult:
+        solves.append(0 if self.clearance is None else self.clearance.size1_out(0))
+        return real(self, *args)
+
+    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", counting)
+    monkeypatch.setattr(trajectory, "ACTIVE_DISTANCE", -1.0)
+    setup = constrained.setup
+    result = trajectory.optimize_knots(setup, constrained.path, constrained.knot_ik)
+    assert len(solves) >= 2 and solves[0] == 0 and 0 < solves[1] < env_rows(constrained)
+    env = setup.environment
+    assert env is not None
+    worst = min(env.sphere_clearance(setup.robot, theta)[0].min() for theta in result.theta)
+    assert worst >= -1e-6
+    assert result.iterations >= 2
+
+
 def test_the_unconstrained_plan_collides_and_is_refused(
     unconstrained: optlight.Plan, collision: Problem, tmp_path: Path
 ) -> None:

@@ -29,7 +29,7 @@ to z = 0, "camera_stand"), and the boxes, cylinders and spheres listed. The view
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import casadi as ca
 import coal
@@ -306,14 +306,16 @@ class Environment:
             self._functions[key] = (robot, build())
         return self._functions[key][1]
 
-    def clearance_function(self, robot: Robot) -> ca.Function:
+    def clearance_function(self, robot: Robot, rows: Sequence[int] | None = None) -> ca.Function:
         """``casadi.Function("clearance", [theta (n×1)], [c (m×1)])``, m = obstacle rows + self rows
         (:meth:`clearance_labels`): c ≥ 0 means every sphere clears every obstacle by ``margin`` and
-        every self pair by ``self_margin`` (m). SX graph, common subexpressions eliminated; built once
-        per robot."""
-        return self._cached(robot, "clearance", lambda: self._build_clearance(robot))
+        every self pair by ``self_margin`` (m). ``rows``: only these rows, in this order (indices
+        into the full list, e.g. :meth:`near_rows`); all by default. SX graph, common subexpressions
+        eliminated; built once per robot and row selection."""
+        name = "clearance" if rows is None else f"clearance{tuple(int(i) for i in rows)}"
+        return self._cached(robot, name, lambda: self._build_clearance(robot, rows))
 
-    def _build_clearance(self, robot: Robot) -> ca.Function:
+    def _build_clearance(self, robot: Robot, selected: Sequence[int] | None) -> ca.Function:
         cm = self.collision_model(robot)
         theta = ca.SX.sym("theta", robot.n)
         centers = self._symbolic_centers(robot, cm.spheres, theta)
@@ -325,8 +327,18 @@ class Environment:
             ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - self.self_margin
             for s, t in cm.self_rows
         ]
+        if selected is not None:
+            rows = [rows[i] for i in selected]
         out = ca.vertcat(*rows) if rows else ca.SX(0, 1)
         return ca.Function("clearance", [theta], [out], ["theta"], ["clearance"], {"cse": True})
+
+    def near_rows(self, robot: Robot, thetas: ArrayLike, distance: float) -> tuple[int, ...]:
+        """The clearance rows (indices into :meth:`clearance_function`'s) below ``distance`` (m) at
+        one or more of ``thetas`` (K, n), rad: the rows that can bind near those configurations."""
+        values = np.array([self.sphere_clearance(robot, theta)[0] for theta in np.atleast_2d(thetas)])
+        if values.size == 0:
+            return ()
+        return tuple(int(i) for i in np.flatnonzero(values.min(axis=0) < distance))
 
     def view_cone_function(self, robot: Robot) -> ca.Function:
         """``casadi.Function("view_clearance", [theta (n×1)], [v (m×1)])``: per robot sphere that can
