@@ -172,7 +172,9 @@ def _type_checking_names(source: str) -> list[tuple[str, str]]:
 def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     """One solve with the environment on builds the object mesh, the robot, each objective (camera and
     search resolution), the environment and its CasADi clearance and view functions once: through
-    ``optlight.solve`` and through ``optlight solve``, whose preflight builds the Setup the solve uses."""
+    ``optlight.solve`` and through ``optlight solve``, whose preflight builds the Setup the solve uses.
+    The clearance graph twice: every row (the placement NLPs) and the rows that can bind along the path
+    (the trajectory NLP)."""
     from optlight import environment, objectives, scene, setup
     from optlight.scene import objects
 
@@ -210,7 +212,7 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
         "search scene": 1,
         "objective": 2,
         "environment": 1,
-        "clearance graph": 1,
+        "clearance graph": 2,
         "view graph": 1,
         "collision model": 1,
     }, counts
