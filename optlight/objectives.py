@@ -117,7 +117,7 @@ class SoftHistogram:
     def casadi(self, u: ca.MX) -> ca.MX:
         """Histogram of the column ``u`` (P×1) as a K×1 MX: one P×K kernel matrix, summed by rows."""
         p = u.size1()
-        d = (ca.repmat(u, 1, self.bins) - ca.DM(np.tile(self.centres, (p, 1)))) / self.sigma
+        d = (ca.repmat(u, 1, self.bins) - ca.repmat(ca.DM(self.centres).T, p, 1)) / self.sigma
         h = ca.sum1(ca.exp(-0.5 * d * d)).T
         return h / ca.sum1(h)
 
@@ -382,7 +382,7 @@ class Objective:
     ``cost(I) = Σ_t w_t · term_t(I[selection] / saturation)`` for the object's pixel vector ``I``
     (P,), in the renderer's units. :meth:`numpy` and :meth:`casadi` compute the same number;
     :attr:`function` is the CasADi Function ``(a: 3×1 light position, v: P×1 visibility) -> cost``
-    through the scene's differentiable luminance model, built once at construction."""
+    through the scene's differentiable luminance model, built once, on first use."""
 
     def __init__(
         self,
@@ -400,7 +400,8 @@ class Objective:
         self.histogram = histogram
         self.saturation = float(saturation)
         self.selection = reference.selection
-        self._function = None if luminance is None else self._compose(luminance)
+        self._luminance = luminance
+        self._function: ca.Function | None = None
 
     @classmethod
     def from_problem(cls, problem: Problem, scene: Scene) -> Objective:
@@ -468,8 +469,10 @@ class Objective:
     @property
     def function(self) -> ca.Function:
         """CasADi Function (a: 3×1 light position, v: P×1 visibility) -> scalar cost, built once."""
-        if self._function is None:
+        if self._luminance is None:
             raise OptlightError("this objective was built without a luminance model (pass luminance=...)")
+        if self._function is None:  # on first use: the camera-resolution objective rarely needs one
+            self._function = self._compose(self._luminance)
         return self._function
 
     def _compose(self, luminance: ca.Function) -> ca.Function:
