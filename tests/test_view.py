@@ -10,6 +10,7 @@ import pinocchio as pin
 import pytest
 import trimesh
 
+from optlight.environment import view as view_module
 from optlight.environment.view import HOUSING, Housing, ViewCheck, _surface
 from optlight.robot import load_robot
 from optlight.spec import RobotSpec
@@ -194,7 +195,9 @@ def test_inputs_are_checked(probe) -> None:
         ),
         (
             lambda: __import__("coal").Box(0.04, 0.1, 0.06),
-            lambda d: min(0.02 / max(abs(d[0]), 1e-12), 0.05 / max(abs(d[1]), 1e-12), 0.03 / max(abs(d[2]), 1e-12)),
+            lambda d: min(
+                0.02 / max(abs(d[0]), 1e-12), 0.05 / max(abs(d[1]), 1e-12), 0.03 / max(abs(d[2]), 1e-12)
+            ),
         ),
     ],
 )
@@ -207,7 +210,9 @@ def test_primitive_surfaces_contain_the_shapes(shape, surface_distance) -> None:
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     # a ray from far outside towards the centre meets the polygon no later than the shape itself
     origins = directions * 1.0
-    locations, index, _ = RayMeshIntersector(mesh).intersects_location(origins, -directions, multiple_hits=False)
+    locations, index, _ = RayMeshIntersector(mesh).intersects_location(
+        origins, -directions, multiple_hits=False
+    )
     assert len(index) == len(directions)
     reach = np.linalg.norm(locations, axis=1)
     analytic = np.array([surface_distance(d) for d in directions[index]])
@@ -221,3 +226,35 @@ def test_a_capsule_is_a_cylinder_with_ball_ends() -> None:
     lo, hi = mesh.bounds
     assert hi[2] == pytest.approx(0.1 + 0.03, rel=0.02) and lo[2] == pytest.approx(-0.13, rel=0.02)
     assert hi[0] >= 0.03 and hi[0] <= 0.03 * 1.02
+
+
+def test_the_cone_cull_never_skips_a_ball_a_ray_meets() -> None:
+    """_sphere_meets_cone against sampled rays of the cone: wherever a sampled segment passes through
+    the ball, the cull keeps it; and it drops balls behind the apex or beyond the reach."""
+    rng = np.random.default_rng(11)
+    kept_by_rays = culled = 0
+    for _ in range(300):
+        axis = _unit(rng.normal(size=3))
+        alpha, reach = rng.uniform(0.05, 0.6), rng.uniform(0.5, 2.0)
+        center = axis * rng.uniform(-0.3, reach + 0.3) + rng.normal(0, 0.4, 3)
+        radius = rng.uniform(0.02, 0.3)
+        # rays: directions uniform in the cap of half-angle alpha about the axis, segments [0, reach]
+        helper = _unit(np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0]))
+        other = np.cross(axis, helper)
+        cos_t = rng.uniform(np.cos(alpha), 1.0, 4000)
+        phi = rng.uniform(0, 2 * np.pi, 4000)
+        sin_t = np.sqrt(1 - cos_t**2)
+        dirs = cos_t[:, None] * axis + sin_t[:, None] * (
+            np.cos(phi)[:, None] * helper + np.sin(phi)[:, None] * other
+        )
+        t = np.clip(dirs @ center, 0.0, reach)
+        met = (np.linalg.norm(t[:, None] * dirs - center, axis=1) <= radius).any()
+        keep = view_module._sphere_meets_cone(center, radius, axis, alpha, reach)
+        assert keep or not met
+        kept_by_rays += met
+        culled += not keep
+    assert kept_by_rays > 50 and culled > 50  # both cases were exercised
+    axis = np.array([0.0, 0.0, 1.0])
+    assert not view_module._sphere_meets_cone(np.array([0.0, 0.0, -1.0]), 0.2, axis, 0.3, 2.0)  # behind
+    assert not view_module._sphere_meets_cone(np.array([0.0, 0.0, 3.0]), 0.2, axis, 0.3, 2.0)  # too far
+    assert view_module._sphere_meets_cone(np.array([0.0, 0.0, 2.1]), 0.2, axis, 0.3, 2.0)  # reaches into it

@@ -122,6 +122,16 @@ class _Body:
     name: str
     caster: RayMeshIntersector
     geometry_index: int  # into the pinocchio GeometryModel; −1 for the housing (light frame)
+    center: Array  # a ball holding the mesh, in the mesh's frame (m): rays far from it skip the mesh
+    radius: float
+
+    @classmethod
+    def of(cls, name: str, mesh: trimesh.Trimesh, geometry_index: int) -> _Body:
+        """The body of ``mesh``, with the ball about its bounding box's centre."""
+        vertices = np.asarray(mesh.vertices, float)
+        center = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
+        radius = float(np.linalg.norm(vertices - center, axis=1).max())
+        return cls(name, RayMeshIntersector(mesh), geometry_index, center, radius)
 
 
 class ViewCheck:
@@ -161,9 +171,9 @@ class ViewCheck:
         bodies = []
         for i, obj in enumerate(self._geometry.geometryObjects):
             link = robot.model.frames[obj.parentFrame].name
-            bodies.append(_Body(link, RayMeshIntersector(_surface(obj.geometry, obj.name)), i))
+            bodies.append(_Body.of(link, _surface(obj.geometry, obj.name), i))
         self._bodies = tuple(bodies)
-        self._housing = _Body(HOUSING, RayMeshIntersector(housing.mesh()), -1)
+        self._housing = _Body.of(HOUSING, housing.mesh(), -1)
 
     def check(self, thetas: ArrayLike, times: ArrayLike) -> ViewReport:
         """View and beam at each capture: ``thetas`` (M, n) joint angles, ``times`` (M,) their times (s)."""
@@ -223,9 +233,17 @@ class ViewCheck:
         first = np.full(lengths.size, -1)
         if lengths.size == 0:
             return []
+        # the rays lie in the cone from the origin about their mean direction u, half-angle α, up to
+        # the longest length: a body whose bounding sphere misses that cone cannot block any of them
+        u = directions.sum(axis=0)
+        u /= np.linalg.norm(u)
+        alpha = float(np.arccos(np.clip((directions @ u).min(), -1.0, 1.0)))
+        reach = float(lengths.max())
         for b, body in enumerate(bodies):
             m = placements[body.geometry_index]
             r, p = m.rotation, m.translation
+            if not _sphere_meets_cone(r @ body.center + p - origin, body.radius, u, alpha, reach):
+                continue
             local_o = np.broadcast_to(r.T @ (origin - p), directions.shape)
             local_d = directions @ r
             hits = _hit_distances(body.caster, local_o, local_d, skip_m)
@@ -233,6 +251,20 @@ class ViewCheck:
             nearest[closer], first[closer] = hits[closer], b
         blocked = nearest < lengths - SURFACE_EPSILON_M
         return [bodies[i].name for i in first[blocked]]
+
+
+def _sphere_meets_cone(w: Array, radius: float, axis: Array, alpha: float, reach: float) -> bool:
+    """Whether the ball of ``radius`` (m) centred at ``w`` (m, from the apex) meets the cone of unit
+    ``axis`` and half-angle ``alpha`` (rad) cut at distance ``reach`` (m) from the apex: the ball's
+    centre is within ``radius`` of the apex, or nearer than ``reach`` + ``radius`` and at an angle
+    from the axis at most ``alpha`` + asin(radius / |w|)."""
+    distance = float(np.linalg.norm(w))
+    if distance <= radius:
+        return True
+    if distance - radius > reach:
+        return False
+    angle = float(np.arccos(np.clip(w @ axis / distance, -1.0, 1.0)))
+    return angle - float(np.arcsin(radius / distance)) <= alpha
 
 
 def _hit_distances(caster: RayMeshIntersector, origins: Array, directions: Array, skip_m: float) -> Array:
