@@ -365,6 +365,36 @@ def landmark_rows(name: str, result: Result) -> list[Row]:
     return rows
 
 
+def scaling_rows(name: str, result: Result) -> list[Row]:
+    """``bench_scaling``: per (captures, obstacles) cell one solve's time per capture, against the
+    smallest cell with the same obstacles (a ratio near 1: flat); success % is whether it verified;
+    beside it the motion time per capture and the mean landmark cost."""
+    cells = result["cells"]
+    smallest = {}
+    for cell in cells:
+        if "error" not in cell:
+            smallest.setdefault(cell["obstacles"], cell["ms_per_capture"])
+    rows = []
+    for cell in cells:
+        label = f"{name} {cell['captures']} captures, {cell['obstacles']} obstacles"
+        if "error" in cell:
+            rows.append(Row(label, "time per capture [ms]", None, success_pct=0.0))
+            continue
+        rows += [
+            Row(
+                label,
+                "time per capture [ms]",
+                cell["ms_per_capture"],
+                success_pct=100.0 * cell["verified"],
+                baseline_median=smallest[cell["obstacles"]],
+            ),
+            Row(label, "solve time [s]", cell["time_s"]),
+            Row(label, "motion time per capture [s]", cell["motion_s_per_capture"]),
+            Row(label, "mean landmark cost", cell["mean_cost"]),
+        ]
+    return rows
+
+
 def ik_rows(name: str, result: Result) -> list[Row]:
     """``bench_ik``: time per pose of every method on every robot; our methods (``ours …``) against
     :data:`IK_BASELINE` on the same poses; success % is the share of poses whose solution was re-checked
@@ -499,6 +529,7 @@ COMPONENT_ROWS: dict[str, RowsFn] = {
     "environment": environment_rows,
     "ik": ik_rows,
     "landmarks": landmark_rows,
+    "scaling": scaling_rows,
 }
 
 
