@@ -524,7 +524,11 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         best, iterations, first_status = seeds[0], 0, ""
         for seed in seeds[: spec.seeds]:
             bracket = _bracket(zenith, seed.zenith, search.sphere)
-            refined, its, status = search.refine(seed, lambda _t, p, v, b=bracket: refiner.solve(p, v, b))
+
+            def solve(_zenith: float, azimuth: float, mask: Array, bracket: tuple[float, float] = bracket) -> Solve:
+                return refiner.solve(azimuth, mask, bracket)
+
+            refined, its, status = search.refine(seed, solve)
             iterations += its
             first_status = first_status or status
             if refined is not None and refined.cost < best.cost:
