@@ -21,6 +21,7 @@ from matplotlib.projections.polar import PolarAxes
 
 from optlight.planning.landmarks import LandmarkSet
 from optlight.scene import Scene
+from optlight.viz.layout import set_margins
 
 #: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
 COST_FLOOR = 1e-12
@@ -37,21 +38,6 @@ def _save(fig: Figure, path: str | Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     return path
-
-
-def _margins(fig: Figure, left: float, right: float, top: float, bottom: float, gap: float = 0.0) -> None:
-    """Place the subplots of a one-row figure with the margins and the gap between them given in
-    inches (where ``bbox_inches="tight"`` would have measured them)."""
-    width, height = fig.get_size_inches()
-    columns = len(fig.axes) or 1
-    axes_width = (width - left - right - (columns - 1) * gap) / columns
-    fig.subplots_adjust(
-        left=left / width,
-        right=1 - right / width,
-        top=1 - top / height,
-        bottom=bottom / height,
-        wspace=gap / axes_width,
-    )
 
 
 def _polar_axes(fig: Figure, r_max: float) -> PolarAxes:
@@ -151,7 +137,8 @@ def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[
         ax.set_xlim(0, 1)
     axes[0].set_ylabel("fraction of pixels")
     axes[0].legend(fontsize=8, frameon=False)
-    _margins(fig, left=0.7, right=0.15, top=0.55, bottom=0.5, gap=0.3)  # two-line titles on top
+    # two-line titles on top
+    set_margins(fig, left=0.7, right=0.15, top=0.55, bottom=0.5, columns=len(fig.axes), gap_x=0.3)
     return _save(fig, path)
 
 

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from optlight.geometry import LightSphere
 from optlight.planning.timing import Trajectory
+from optlight.viz.layout import set_margins
 
 
 def trajectory_figure(
@@ -48,16 +49,7 @@ def trajectory_figure(
     width, height = 13.0, 1.7 * n + 0.8
     fig = Figure(figsize=(width, height))
     # margins (in): the joint names and tick labels on the left, the titles on top, t below
-    left, right, top, bottom, gap_x, gap_y = 0.85, 0.15, 0.75, 0.5, 0.55, 0.2
-    axes_w, axes_h = (width - left - right - 2 * gap_x) / 3, (height - top - bottom - (n - 1) * gap_y) / n
-    fig.subplots_adjust(
-        left=left / width,
-        right=1 - right / width,
-        top=1 - top / height,
-        bottom=bottom / height,
-        wspace=gap_x / axes_w,
-        hspace=gap_y / axes_h,
-    )
+    set_margins(fig, left=0.85, right=0.15, top=0.75, bottom=0.5, rows=n, columns=3, gap_x=0.55, gap_y=0.2)
     axes = fig.subplots(n, 3, sharex=True, squeeze=False)
     dwells = [[(a, 0.0), (b, 0.0), (b, 1.0), (a, 1.0)] for a, b in trajectory.landmark_intervals]
     captures = [[(tc, 0.0), (tc, 1.0)] for tc in trajectory.capture_times]
