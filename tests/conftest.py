@@ -1,4 +1,5 @@
-"""Shared fixtures: built-in problems reduced to test sizes, and built setups of them.
+"""Shared fixtures: built-in problems reduced to test sizes, and built setups of them; the display
+mesh cache in a temporary folder for the session, so that tests never write to the user's cache.
 
 Tests import :func:`reduced_problem` (``from conftest import reduced_problem``) where a module needs
 its own variant at import time; fixtures give the common ones, built once per session.
@@ -6,12 +7,27 @@ its own variant at import time; fixtures give the common ones, built once per se
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
 from optlight.setup import Setup
 from optlight.spec import Problem, load_problem, problem_from_dict
+
+
+@pytest.fixture(scope="session", autouse=True)
+def private_mesh_cache(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """``OPTLIGHT_CACHE`` set to a folder of this session (processes the tests start inherit it)."""
+    before = os.environ.get("OPTLIGHT_CACHE")
+    os.environ["OPTLIGHT_CACHE"] = str(tmp_path_factory.mktemp("optlight-cache"))
+    yield
+    if before is None:
+        del os.environ["OPTLIGHT_CACHE"]
+    else:
+        os.environ["OPTLIGHT_CACHE"] = before
+
 
 #: The paper's layout (the robot's base between the camera and the face) with the camera's view not
 #: protected, for tests about reach alone: there the reference light (zenith 10°) and the pole are
