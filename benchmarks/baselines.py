@@ -105,7 +105,7 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
         )
         for theta in knots
     )
-    report = verify_knots(setup, trajectory, positions, knots)
+    report = verify_knots(setup, trajectory, positions, knots, path.transfers)
     intervals = trajectory.landmark_intervals
     return {
         "time_s": elapsed,

@@ -60,7 +60,8 @@ def verify_in_environment(plan: optlight.Plan, environment: Environment) -> Veri
         acceleration_limit=robot.acceleration_limit,
         sphere=plan.scene.sphere,
         landmark_positions=np.array([lm.position for lm in plan.visited]),
-        planned_path=np.array([robot.light_pose(t)[0] for t in plan.nlp.theta]),
+        planned_path=robot.light_positions(plan.nlp.theta),
+        transfers=plan.path.transfers,
         environment=lambda q, t, captures: environment.check(robot, q, t, capture_times=captures),
     )
 

@@ -14,8 +14,10 @@ A straight line of stages, each taking built objects and returning a typed resul
 4. ``path``: visiting order, great-circle knots, and per-knot IK along the path (the paper's
    pipeline, and the NLP's warm start);
 5. ``nlp``: the trajectory NLP over all knots (:func:`~optlight.planning.trajectory.optimize_knots`),
-   with the view rows (``[view]``) and clearance rows (``[environment] enabled``); the transfers from
-   the start configuration to the first capture and back (``[trajectory] return_home``);
+   with the view rows (``[view]``) and clearance rows (``[environment] enabled``); where it finds no
+   way on the sphere, the segments whose arc the per-knot IK could not follow leave it
+   (:func:`optimize_path`); the transfers from the start configuration to the first capture and back
+   (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
@@ -36,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
+from optlight.errors import SolverError
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
@@ -49,7 +52,7 @@ from optlight.planning.set_landmarks import (
     tour_order,
 )
 from optlight.planning.timing import Trajectory, time_parameterize
-from optlight.planning.trajectory import optimize_knots, plan_transfer
+from optlight.planning.trajectory import TrajectoryNLPResult, optimize_knots, plan_transfer
 from optlight.setup import Setup
 from optlight.spec import Problem
 from optlight.verify import VerificationReport, verify_trajectory
@@ -101,17 +104,23 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         path = capture_path(setup, positions, landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
     lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
-    if failures:
-        notes.append(f"per-knot IK did not converge at {failures} of {path.n_knots} knots (NLP warm start)")
+    if failures.any():
+        notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
-        nlp = optimize_knots(setup, path, warm)
+        path, warm, nlp = optimize_path(setup, path, warm, failures, landmark_thetas)
+    if path.transfers.any():
+        joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
+        notes.append(
+            f"the light leaves the sphere between captures {joined} (visiting order): the per-knot IK "
+            "could not follow their great-circle arcs and the trajectory NLP found no way on the sphere"
+        )
 
     with stage("timing"):
         trajectory = time_knots(setup, path, nlp.theta)
 
     with stage("verify"):
-        report = verify_knots(setup, trajectory, positions, nlp.theta)
+        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -171,6 +180,25 @@ def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> Ligh
     )
 
 
+def optimize_path(
+    setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64], landmark_thetas: Array
+) -> tuple[LightPath, Array, TrajectoryNLPResult]:
+    """The trajectory NLP on the sphere (the paper's path), warm-started at the per-knot IK ``warm``
+    (K, n); when it fails, the segments where that IK missed a knot (``failures`` (M − 1,)) become
+    transfers: the light leaves the sphere between their captures, the arm moving in joint space
+    (:attr:`LightPath.transfers`, warm-started on the straight line between the captures'
+    ``landmark_thetas``), and the NLP runs again. Returns the path, its warm start and the NLP's
+    result; raises :class:`SolverError` when the NLP fails with no such segment, or again."""
+    try:
+        return path, warm, optimize_knots(setup, path, warm)
+    except SolverError:
+        if not failures.any():
+            raise
+    path = path.with_transfers(failures > 0)
+    warm, _ = knot_ik(setup, path, landmark_thetas)
+    return path, warm, optimize_knots(setup, path, warm)
+
+
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     """The timed trajectory through the knots ``theta`` (K, n) (rad) of ``path``: the transfer from the
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
@@ -193,11 +221,14 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     return timed(spec.dwell_s, joint_names=setup.robot.joint_names, approach=approach, retreat=retreat)
 
 
-def verify_knots(setup: Setup, trajectory: Trajectory, positions: Array, theta: Array) -> VerificationReport:
+def verify_knots(
+    setup: Setup, trajectory: Trajectory, positions: Array, theta: Array, transfers: NDArray[np.bool_]
+) -> VerificationReport:
     """Verify ``trajectory`` independently of the planner, at max(1 kHz, ``rate_hz``): limits (jerk
     and acceleration continuity when jerk-limited), h and aim at the captures ``positions`` (M, 3)
-    (m), deviation from the path of the knots ``theta`` (K, n), the environment by exact coal
-    distances, the camera's view and the beam by exact ray casting at the captures."""
+    (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
+    where the light must stay outside the sphere, the environment by exact coal distances, the
+    camera's view and the beam by exact ray casting at the captures."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
         trajectory,
@@ -208,7 +239,8 @@ def verify_knots(setup: Setup, trajectory: Trajectory, positions: Array, theta: 
         acceleration_limit=limits.acceleration,
         sphere=setup.sphere,
         landmark_positions=positions,
-        planned_path=np.array([robot.light_pose(t)[0] for t in theta]),
+        planned_path=robot.light_positions(theta),
+        transfers=transfers,
         environment=(
             (lambda q, t, captures: environment.check(robot, q, t, capture_times=captures))
             if environment is not None

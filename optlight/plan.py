@@ -126,7 +126,7 @@ class Plan:
             self.robot,
             np.array([lm.position for lm in self.visited]),
             np.array([lm.cost for lm in self.visited]),
-            self.path.positions,
+            self.robot.light_positions(self.nlp.theta),  # the knots, off the sphere on the transfers
             self.trajectory,
             light_position=self.visited[0].position,
         )

@@ -100,6 +100,7 @@ def plan_dict(
             "time_s": nlp.time_s,
             "knots": path.n_knots,
             "landmark_knots": path.landmark_knots,
+            "transfers": np.flatnonzero(path.transfers),  # segments off the sphere, in visiting order
         },
         "summary": dict(summary),
         "warnings": list(warnings),
@@ -250,8 +251,8 @@ def save_results(
         ),
         "path": path_figure(
             setup.sphere,
-            path.positions,
-            np.array([robot.light_pose(q)[0] for q in timed]),
+            robot.light_positions(nlp.theta),  # the knots, off the sphere on the transfers
+            robot.light_positions(timed),
             np.array([lm.position for lm in visited]),
         ),
         **(extra_figures or {}),

@@ -12,7 +12,10 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``aim``: angle between the light axis R e_z and O − a ≤ aim_rad;
   ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
 - ``path`` (when a planned path is given): distance from every sampled light position to the
-  polyline of planned light positions ≤ path_m;
+  polyline of planned light positions ≤ path_m, from the first capture to the last except on the
+  transfers (``transfers``: the segments between two captures where the light leaves the sphere);
+- ``outside`` (with transfers): on them, the light's depth inside the sphere b − |a − O| ≤ path_m
+  (off the sphere, never nearer the object than the captures);
 - with a jerk limit: ``jerk``: |q⃛_j| ≤ j_max,j (1 + limit_rel) (the trajectory's own q⃛), and
   ``acceleration_continuity``: on the controller's grid t_k = k / rate_hz, the largest jump
   |q̈_j(t_{k+1}) − q̈_j(t_k)| relative to what the jerk limit allows in one step, j_max,j / rate_hz
@@ -208,6 +211,7 @@ def verify_trajectory(
     sphere: LightSphere,
     landmark_positions: ArrayLike,
     planned_path: ArrayLike | None = None,
+    transfers: ArrayLike | None = None,
     environment: EnvironmentCheck | None = None,
     jerk_limit: ArrayLike | None = None,
     view: ViewCheck | None = None,
@@ -227,6 +231,8 @@ def verify_trajectory(
         landmark_positions: (M, 3) light positions (m, world) of the landmarks, in visiting order.
         planned_path: (K, 3) light positions (m, world) along the planned path, or None to skip the
             path check.
+        transfers: (M − 1,) True for the segments between two captures (in visiting order) where the
+            light leaves the sphere, or None for none.
         environment: exact clearance / self-collision / view-cone check of the samples, or None.
         jerk_limit: (n,) positive jerk limits (rad/s³), or None to skip the jerk and acceleration
             continuity checks (a TOPPRA-timed trajectory has no bounded jerk).
@@ -307,9 +313,14 @@ def verify_trajectory(
     in_dwell = np.flatnonzero(dwell_of >= 0)
     # the planned path runs from the first capture to the last; the approach and the return (joint-space
     # transfers to and from the start configuration) are checked by the limits and the environment
-    on_path = np.flatnonzero((t >= intervals[0, 0] - 1e-12) & (t <= intervals[-1, 1] + 1e-12))
+    # (and so are the transfers between two captures, which must also stay outside the sphere)
+    off_sphere = np.zeros(t.size, bool)
+    for s in np.flatnonzero(np.zeros(len(intervals) - 1, bool) if transfers is None else transfers):
+        off_sphere |= (t > intervals[s, 1] + 1e-12) & (t < intervals[s + 1, 0] - 1e-12)
+    path_times = (t >= intervals[0, 0] - 1e-12) & (t <= intervals[-1, 1] + 1e-12) & ~off_sphere
+    on_path, in_transfer = np.flatnonzero(path_times), np.flatnonzero(off_sphere)
     path_needed = planned_path is not None
-    pose_at = np.union1d(on_path, in_dwell) if path_needed else in_dwell
+    pose_at = np.union1d(np.union1d(on_path, in_dwell) if path_needed else in_dwell, in_transfer)
     positions = np.full((t.size, 3), np.nan)
     rotations = np.full((t.size, 3, 3), np.nan)
     for k in pose_at:
@@ -355,6 +366,17 @@ def verify_trajectory(
         )
     else:
         skipped += ("path",)
+    if in_transfer.size:
+        depth = sphere.radius - np.linalg.norm(positions[in_transfer] - sphere.center, axis=1)
+        collector.scalar_check(
+            "outside",
+            "largest depth of the light inside the sphere on the transfers",
+            "m",
+            depth,
+            tol.path_m,
+            in_transfer,
+            lambda k, v: f"light {v * 1e3:.3g} mm inside the sphere at t = {t[k]:.4f} s (> {tol.path_m * 1e3:.3g} mm)",
+        )
     if environment is not None:
         _environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
     if view is not None:

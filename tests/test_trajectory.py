@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import casadi as ca
 import numpy as np
 import pytest
 
+from optlight.errors import SolverError
 from optlight.geometry import h_residual
+from optlight.pipeline import time_knots, verify_knots
 from optlight.plan import joint_path_length
 from optlight.planning.path import build_path
 from optlight.planning.policy import knot_ik
 from optlight.planning.trajectory import TrajectoryOptimizer
 from optlight.robot import generalized_ik
 from optlight.setup import Setup
+from optlight.verify import verify_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +30,7 @@ def setup(small_setup: Setup):
     for k in path.landmark_knots[1:]:
         postures.append(generalized_ik(robot, sphere, path.positions[k], postures[-1], restarts=False).theta)
     warm, failures = knot_ik(small_setup, path, np.array(postures))
-    assert failures == 0
+    assert not failures.any()
     return robot, sphere, path, warm
 
 
@@ -76,3 +81,90 @@ def test_the_solver_is_built_once_per_size(setup, monkeypatch) -> None:
     for _ in range(3):
         assert opt.solve(path, sphere, warm + 1e-3).success
     assert built == ["trajectory_nlp"]
+
+
+@pytest.fixture(scope="module")
+def transfer(setup, small_setup: Setup):
+    """The path with its second segment a transfer (off the sphere), solved from the straight line."""
+    robot, sphere, path, _ = setup
+    leaving = path.with_transfers([False, True, False, False])
+    postures = np.array(
+        [generalized_ik(robot, sphere, path.positions[k]).theta for k in path.landmark_knots]
+    )
+    warm, _ = knot_ik(small_setup, leaving, postures)
+    segment = leaving.segments()[1]
+    np.testing.assert_allclose(np.diff(warm[segment], 2, axis=0), 0.0, atol=1e-12)  # the joint-space line
+    return leaving, TrajectoryOptimizer(robot, path_mode="free").solve(leaving, sphere, warm)
+
+
+def test_a_transfer_segment_leaves_the_sphere_outwards_and_the_rest_stays_on_it(setup, transfer) -> None:
+    robot, sphere, path, warm = setup
+    leaving, result = transfer
+    assert result.success
+    on_sphere = leaving.on_sphere()
+    segment = leaving.segments()[1]
+    assert not on_sphere[segment.start + 1 : segment.stop - 1].any() and on_sphere.sum() == (
+        path.n_knots - (segment.stop - segment.start - 2)
+    )
+    h = []
+    for q in result.theta:
+        p, r = robot.light_pose(q)  # pinocchio, not the CasADi mirror the NLP used
+        h.append(np.linalg.norm(h_residual(p, r, sphere.center, sphere.radius)))
+    h = np.array(h)
+    assert h[on_sphere].max() < 1e-7
+    outside = np.linalg.norm(robot.light_positions(result.theta) - sphere.center, axis=1) - sphere.radius
+    assert outside[~on_sphere].min() > -1e-7  # never nearer the object than the sphere
+    assert h[~on_sphere].max() > 1e-3, "the transfer did leave the sphere (or the aim) somewhere"
+    on_the_sphere = TrajectoryOptimizer(robot, path_mode="free").solve(path, sphere, warm)
+    assert result.cost <= on_the_sphere.cost + 1e-9  # a transfer relaxes h on its interior knots
+
+
+def test_verification_skips_the_path_on_transfers_and_checks_the_light_stays_outside(
+    small_setup: Setup, setup, transfer
+) -> None:
+    _, sphere, _, _ = setup
+    leaving, result = transfer
+    trajectory = time_knots(small_setup, leaving, result.theta)
+    captures = leaving.positions[leaving.landmark_knots]
+    report = verify_knots(small_setup, trajectory, captures, result.theta, leaving.transfers)
+    assert report.checks["outside"].max_value <= 1e-3 and report.checks["path"].passed
+    # the same light positions against a sphere 1 cm larger: the transfer is inside it by ~1 cm
+    robot, limits = small_setup.robot, small_setup.limits
+    deeper = verify_trajectory(
+        trajectory,
+        light_pose=robot.light_pose,
+        lower=limits.lower,
+        upper=limits.upper,
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+        sphere=replace(sphere, radius=sphere.radius + 0.01),
+        landmark_positions=captures,
+        transfers=leaving.transfers,
+    )
+    assert 0.009 < deeper.checks["outside"].max_value and not deeper.checks["outside"].passed
+
+
+def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
+    small_setup: Setup, setup, monkeypatch
+) -> None:
+    import optlight.pipeline as pipeline
+
+    _, _, path, warm = setup
+    thetas = warm[path.landmark_knots]
+    seen = []
+
+    def on_the_sphere_fails(setup_, path_, warm_):
+        seen.append(path_.transfers.copy())
+        if not path_.transfers.any():
+            raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
+        return "solved"
+
+    monkeypatch.setattr(pipeline, "optimize_knots", on_the_sphere_fails)
+    with pytest.raises(SolverError):  # no knot the per-knot IK missed: nowhere to leave the sphere
+        pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), thetas)
+    left, left_warm, result = pipeline.optimize_path(small_setup, path, warm, np.array([0, 0, 3, 0]), thetas)
+    assert result == "solved" and left.transfers.tolist() == [False, False, True, False]
+    assert [t.tolist() for t in seen[1:]] == [[False] * 4, [False, False, True, False]]
+    segment = left.segments()[2]
+    np.testing.assert_allclose(np.diff(left_warm[segment], 2, axis=0), 0.0, atol=1e-12)
+    np.testing.assert_array_equal(left_warm[: segment.start + 1], warm[: segment.start + 1])

@@ -8,7 +8,7 @@ by parallel transport, so it never flips (DESIGN §3: never build the frame from
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,6 +26,10 @@ class LightPath:
     ``rotations`` (K, 3, 3) light frames (z at O, roll by parallel transport), ``order`` (M,) the
     landmark indices in visiting order, ``landmark_knots`` (M,) the knot of each visited landmark.
     Segment ``s`` runs from knot ``landmark_knots[s]`` to ``landmark_knots[s + 1]`` (both included).
+
+    ``transfers`` (M − 1,) marks the segments the light leaves the sphere on: their interior knots
+    are joint-space knots (the arm reconfigures between two captures whose great-circle arc it cannot
+    follow), and their directions, positions and rotations are the arc the light leaves.
     """
 
     directions: Array
@@ -33,6 +37,7 @@ class LightPath:
     rotations: Array
     order: NDArray[np.int64]
     landmark_knots: NDArray[np.int64]
+    transfers: NDArray[np.bool_]
 
     @property
     def n_knots(self) -> int:
@@ -43,6 +48,22 @@ class LightPath:
         """Knot slices from one visited landmark to the next (both ends included)."""
         k = self.landmark_knots
         return [slice(int(k[s]), int(k[s + 1]) + 1) for s in range(len(k) - 1)]
+
+    def on_sphere(self) -> NDArray[np.bool_]:
+        """(K,) True at the knots where the light is on the sphere: all but the interior knots of the
+        transfer segments."""
+        mask = np.ones(self.n_knots, bool)
+        for segment, transfer in zip(self.segments(), self.transfers, strict=True):
+            if transfer:
+                mask[segment.start + 1 : segment.stop - 1] = False
+        return mask
+
+    def with_transfers(self, transfers: ArrayLike) -> LightPath:
+        """The same knots, with the segments marked in ``transfers`` (M − 1,) off the sphere."""
+        mask = np.asarray(transfers, bool)
+        if mask.shape != self.transfers.shape:
+            raise ValueError(f"transfers has shape {mask.shape}, expected {self.transfers.shape}")
+        return replace(self, transfers=mask)
 
     def arc_lengths(self) -> Array:
         """Angle (rad) travelled on the sphere along each segment."""
@@ -152,7 +173,9 @@ def build_path(
     units = (pts - sphere.center) / np.linalg.norm(pts - sphere.center, axis=1, keepdims=True)
     knots = [units[order_arr[0]][None, :]]
     landmark_knots = [0]
-    least = np.ones(len(order_arr) - 1, dtype=np.int64) if min_intervals is None else np.asarray(min_intervals)
+    least = (
+        np.ones(len(order_arr) - 1, dtype=np.int64) if min_intervals is None else np.asarray(min_intervals)
+    )
     for a, b, n in zip(order_arr[:-1], order_arr[1:], least, strict=True):
         omega = float(np.arccos(np.clip(units[a] @ units[b], -1.0, 1.0)))
         arc = great_circle(units[a], units[b], min(knot_spacing, omega / n) if omega > 0.0 else knot_spacing)
@@ -168,4 +191,5 @@ def build_path(
         rotations=parallel_transport_frames(directions, x0),
         order=order_arr,
         landmark_knots=np.asarray(landmark_knots, dtype=np.int64),
+        transfers=np.zeros(len(order_arr) - 1, bool),
     )

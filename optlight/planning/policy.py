@@ -255,26 +255,32 @@ def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int
     return azimuth_order([lm.azimuth for lm in placement.landmarks])
 
 
-def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Array, int]:
+def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Array, NDArray[np.int64]]:
     """Per-knot generalized IK along the path (the paper's pipeline, and the trajectory NLP's warm
     start), through the landmarks' own joint angles ``landmark_thetas`` (M, n, visiting order: the
     placement's, clear of the environment): a landmark knot takes its landmark's angles; an interior
     knot k of a segment ending at knot k₁ starts the IK from θ_{k−1} + (θ_{L} − θ_{k−1}) / (k₁ − k + 1),
     a share of the way to the next landmark's angles θ_L, so the chain arrives at the posture the
-    placement chose rather than wherever continuation leads. Returns the (K, n) angles and the number
-    of knots where IK did not converge."""
+    placement chose rather than wherever continuation leads. A transfer segment (off the sphere,
+    :attr:`LightPath.transfers`) takes the straight line in joint space between its landmarks'
+    angles. Returns the (K, n) angles and, per segment (M − 1,), the number of knots where IK did
+    not converge."""
     robot = setup.robot
     thetas = np.empty((path.n_knots, robot.n))
     knots = path.landmark_knots
     thetas[knots] = landmark_thetas
-    failures = 0
+    failures = np.zeros(len(path.transfers), dtype=np.int64)
     for s, segment in enumerate(path.segments()):
         goal, last = landmark_thetas[s + 1], segment.stop - 1
+        if path.transfers[s]:
+            share = np.linspace(0.0, 1.0, last - segment.start + 1)[1:-1, None]
+            thetas[segment.start + 1 : last] = landmark_thetas[s] + share * (goal - landmark_thetas[s])
+            continue
         for k in range(segment.start + 1, last):
             previous = thetas[k - 1]
             start = previous + (goal - previous) / (last - k + 1)
             # no random restarts: a restart lands on another IK branch, a jump the path cannot make
             result = generalized_ik(robot, setup.sphere, path.positions[k], start, restarts=False, **setup.ik)
-            failures += not result.success
+            failures[s] += not result.success
             thetas[k] = result.theta
     return thetas, failures

@@ -7,6 +7,9 @@ position and rotation from the symbolic forward kinematics:
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
+- the interior knots of a transfer segment (:attr:`LightPath.transfers`) are off the sphere: instead
+  of h, the one row (|a_k − O|² − b²) / 2b ≥ 0 (to first order the light's distance outside the
+  sphere, m), so the light never comes nearer the object than the captures do;
 - joint bounds (minus :data:`~optlight.planning.nlp.LIMIT_MARGIN`), and |θ_{k+1} − θ_k| ≤ max_step per joint;
 - with an environment (:mod:`optlight.environment`): clearance c(θ_k) ≥ 0 at every knot (robot
   spheres to obstacles and to each other, margins included) and the view cone kept clear,
@@ -96,12 +99,12 @@ class TrajectoryOptimizer:
         self.options = ipopt_options(
             solver or SolverSpec(), ipopt__constr_viol_tol=1e-9, ipopt__hessian_approximation="exact"
         )
-        self._solvers: dict[tuple[int, tuple[int, ...]], ca.Function] = {}
+        self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...]], ca.Function] = {}
         self._knot_fn = self._build_knot_function()
 
     def _build_knot_function(self) -> ca.Function:
         """Per-knot constraints g(θ, O, b, n, u_start, u_end, t1, t2, a*) as one SX function:
-        [h (3); plane (1); wedge (2); pin (2)]."""
+        [h (3); plane (1); wedge (2); pin (2); outside (1)]."""
         n = self.robot.n
         theta = ca.SX.sym("theta", n)
         center, normal, u0, u1, t1, t2, target = (
@@ -112,19 +115,20 @@ class TrajectoryOptimizer:
         h = light_rows(a, rot, center, radius)
         plane, wedge = arc_rows(a, center, normal, u0, u1)
         pin = pin_rows(a, target, t1, t2)
+        outside = (ca.sumsqr(a - center) - radius**2) / (2.0 * radius)
         return ca.Function(
             "knot_constraints",
             [theta, center, radius, normal, u0, u1, t1, t2, target],
-            [ca.vertcat(h, plane, wedge, pin)],
+            [ca.vertcat(h, plane, wedge, pin, outside)],
         )
 
-    def _solver(self, n_knots: int, landmark_knots: tuple[int, ...]) -> ca.Function:
-        key = (n_knots, landmark_knots)
+    def _solver(self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...]) -> ca.Function:
+        key = (n_knots, landmark_knots, off_sphere)
         if key not in self._solvers:
-            self._solvers[key] = self._build_solver(n_knots, landmark_knots)
+            self._solvers[key] = self._build_solver(*key)
         return self._solvers[key]
 
-    def _build_solver(self, n_knots: int, landmark_knots: tuple[int, ...]) -> ca.Function:
+    def _build_solver(self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...]) -> ca.Function:
         n = self.robot.n
         theta = ca.MX.sym("theta", n, n_knots)
         # parameters: O (3), b (1), θ_ref (n), then per knot n, u0, u1, t1, t2, a* (18 × K)
@@ -143,12 +147,13 @@ class TrajectoryOptimizer:
             per_knot[12:15, :],
             per_knot[15:18, :],
         )
-        h = ca.vec(g_all[0:3, :])
+        on_sphere = [k for k in range(n_knots) if k not in set(off_sphere)]
+        h = ca.vec(g_all[0:3, on_sphere])
         pins = ca.vec(g_all[6:8, list(landmark_knots)])
         steps = ca.vec(theta[:, 1:] - theta[:, :-1])
-        constraints = [h, pins, steps]
+        constraints = [h, pins, steps, ca.vec(g_all[8, list(off_sphere)])]
         if self.path_mode == "arc":
-            interior = [k for k in range(n_knots) if k not in set(landmark_knots)]
+            interior = [k for k in on_sphere if k not in set(landmark_knots)]
             constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
         if self.clearance is not None:
             constraints.append(ca.vec(self.clearance.map(n_knots)(theta)))
@@ -162,14 +167,14 @@ class TrajectoryOptimizer:
         nlp = {"x": ca.vec(theta), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
         return ca.nlpsol("trajectory_nlp", "ipopt", nlp, self.options)
 
-    def bounds(self, n_knots: int, n_landmarks: int) -> tuple[Array, Array]:
+    def bounds(self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0) -> tuple[Array, Array]:
         """lbg, ubg in the order the constraints are stacked in the solver."""
         n = self.robot.n
-        eq = np.zeros(3 * n_knots + 2 * n_landmarks)
+        eq = np.zeros(3 * (n_knots - n_off_sphere) + 2 * n_landmarks)
         step = np.full(n * (n_knots - 1), self.max_step)
-        lbg, ubg = [eq, -step], [eq, step]
+        lbg, ubg = [eq, -step, np.zeros(n_off_sphere)], [eq, step, np.full(n_off_sphere, np.inf)]
         if self.path_mode == "arc":
-            n_int = n_knots - n_landmarks
+            n_int = n_knots - n_landmarks - n_off_sphere
             lbg += [np.zeros(n_int), np.zeros(2 * n_int)]
             ubg += [np.zeros(n_int), np.full(2 * n_int, np.inf)]
         rows = 0
@@ -185,7 +190,8 @@ class TrajectoryOptimizer:
         """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n)."""
         n_knots, n = path.n_knots, self.robot.n
         landmark_knots = tuple(int(k) for k in path.landmark_knots)
-        solver = self._solver(n_knots, landmark_knots)
+        off_sphere = tuple(int(k) for k in np.flatnonzero(~path.on_sphere()))
+        solver = self._solver(n_knots, landmark_knots, off_sphere)
         per_knot = np.zeros((n_knots, 18))
         for seg in path.segments():
             u0, u1 = path.directions[seg.start], path.directions[seg.stop - 1]
@@ -197,7 +203,7 @@ class TrajectoryOptimizer:
             per_knot[k, 9:12], per_knot[k, 12:15] = tangent_basis(path.directions[k])
         per_knot[:, 15:18] = path.positions
         p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
-        lbg, ubg = self.bounds(n_knots, len(landmark_knots))
+        lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere))
         lower, upper = knot_bounds(self.robot)
         lbx, ubx = np.tile(lower, n_knots), np.tile(upper, n_knots)
         x0 = np.clip(np.asarray(theta0, float).ravel(), lbx, ubx)
@@ -207,7 +213,8 @@ class TrajectoryOptimizer:
         stats = solver.stats()
         theta = np.asarray(out["x"]).reshape(n_knots, n)
         g = np.asarray(out["g"]).ravel()
-        max_h = float(np.max(np.abs(g[: 3 * n_knots]))) if n_knots else 0.0
+        n_h = 3 * (n_knots - len(off_sphere))  # the h rows come first, on-sphere knots only
+        max_h = float(np.max(np.abs(g[:n_h]))) if n_h else 0.0
         if not np.all(np.isfinite(theta)):
             raise SolverError(f"trajectory NLP returned non-finite joint angles ({stats['return_status']})")
         return TrajectoryNLPResult(

@@ -363,6 +363,10 @@ class Robot:
         m = pin.updateFramePlacement(self.model, self.data, self.light_frame_id)
         return m.translation.copy(), m.rotation.copy()
 
+    def light_positions(self, thetas: ArrayLike) -> Array:
+        """Light positions (K, 3) in m, world frame, at the joint angles ``thetas`` (K, n)."""
+        return np.array([self.light_pose(theta)[0] for theta in np.reshape(thetas, (-1, self.n))])
+
     def frame_pose(self, frame: str, theta: ArrayLike) -> pin.SE3:
         """World placement of a frame of the model (any URDF link, ``flange`` or ``light``)."""
         fid = self.frame_id(frame)
