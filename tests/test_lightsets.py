@@ -5,6 +5,7 @@ RTI coverage, the Yale B grid and its mapping onto allowed lights, and bad input
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
 import casadi as ca
@@ -391,3 +392,13 @@ def test_problem_builds_set_costs_and_grids(face: tuple[Scene, Objective], tmp_p
     from optlight.spec import load_problem
 
     assert len(grid_from_problem(load_problem(tmp_path / "p.toml")).names) == 1
+
+
+def test_riesz_energy_of_two_coincident_lights_is_infinite_without_a_warning() -> None:
+    lights = Cap(0.0, math.radians(60.0)).lattice(5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a RuntimeWarning (division by zero, a NaN power) fails
+        pole = np.array([[0.0, 0.0, 1.0]])  # 2 − 2 d·d is exactly 0
+        assert RieszEnergy().numpy(np.vstack([lights, pole, pole])) == math.inf
+        assert RieszEnergy().numpy(np.vstack([lights, lights[2]])) > 1e20  # inf, or 1e30 by rounding
+        assert math.isfinite(RieszEnergy().numpy(lights))
