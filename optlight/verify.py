@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from optlight.errors import VerificationError
 from optlight.geometry import LightSphere, h_residual
@@ -67,8 +68,8 @@ ENVIRONMENT_CHECKS = {"obstacle": "clearance", "self": "self_collision", "view":
 
 #: Episodes kept per check in :attr:`VerificationReport.violations`.
 MAX_EPISODES = 5
-#: Points per chunk in the point-to-polyline distance (bounds memory: chunk × segments × 3 floats).
-_CHUNK = 256
+#: Points per chunk in the point-to-polyline distance (bounds the memory of the near segments' lists).
+_CHUNK = 50_000
 
 
 @dataclass(frozen=True)
@@ -495,17 +496,31 @@ def _environment_checks(collector: _Collector, report: Any, samples: int) -> Non
 def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
     """Euclidean distance (m) from each of the points (P, 3) to the polyline through (K, 3) vertices
     (a single vertex is a point): min over segments [v_i, v_{i+1}] of |p − (v_i + c (v_{i+1} − v_i))|,
-    c = clip((p − v_i)·d_i / |d_i|², 0, 1)."""
-    p = np.asarray(points, float).reshape(-1, 3)
+    c = clip((p − v_i)·d_i / |d_i|², 0, 1).
+
+    Only the segments that can be nearest are measured: the nearest vertex, at r₀, bounds the
+    distance, and a segment with a point within r₀ of p has its start within r₀ + max_i |d_i| of p
+    (a k-d tree finds those). Exact, and O(P log K) for the even knots of a plan instead of O(P K)
+    (576 captures: 30 s of the verification)."""
+    points = np.asarray(points, float).reshape(-1, 3)
     v = np.asarray(polyline, float).reshape(-1, 3)
-    a = v[:-1] if len(v) > 1 else v
-    d = np.diff(v, axis=0) if len(v) > 1 else np.zeros((1, 3))
+    out = np.full(len(points), np.nan)  # a NaN point or vertex: NaN, which fails the check
+    if len(v) == 1 or not np.isfinite(v).all():
+        return np.linalg.norm(points - v[0], axis=1) if len(v) == 1 else out
+    finite = np.flatnonzero(np.isfinite(points).all(axis=1))
+    p = points[finite]
+    a, d = v[:-1], np.diff(v, axis=0)
     dd = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
-    out = np.empty(len(p))
+    bound = (cKDTree(v).query(p)[0] + math.sqrt(float(dd.max()))) * (1.0 + 1e-9) + 1e-12  # rounding
+    starts = cKDTree(a)
     for s in range(0, len(p), _CHUNK):
-        rel = p[s : s + _CHUNK, None, :] - a[None]  # (C, S, 3)
-        c = np.clip(np.einsum("csk,sk->cs", rel, d) / dd, 0.0, 1.0)
-        out[s : s + _CHUNK] = np.linalg.norm(rel - c[..., None] * d[None], axis=2).min(axis=1)
+        near = starts.query_ball_point(p[s : s + _CHUNK], bound[s : s + _CHUNK])
+        counts = np.fromiter(map(len, near), np.int64, len(near))
+        segment = np.concatenate(near).astype(np.int64)
+        rel = np.repeat(p[s : s + _CHUNK], counts, axis=0) - a[segment]
+        c = np.clip(np.einsum("ck,ck->c", rel, d[segment]) / dd[segment], 0.0, 1.0)
+        distance = np.linalg.norm(rel - c[:, None] * d[segment], axis=1)
+        out[finite[s : s + _CHUNK]] = np.minimum.reduceat(distance, np.r_[0, np.cumsum(counts)[:-1]])
     return out
 
 

@@ -214,3 +214,27 @@ def test_distance_to_polyline() -> None:
     pts = np.array([[0.5, 0.2, 0], [2, 0, 0], [1, 0.5, 0.3], [-1, 0, 0], [0.5, 0, 0]])
     np.testing.assert_allclose(distance_to_polyline(pts, poly), [0.2, 1.0, 0.3, 1.0, 0.0])
     np.testing.assert_allclose(distance_to_polyline(pts[:1], poly[:1]), [np.hypot(0.5, 0.2)])
+
+
+def brute_force_distance(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Distance to the nearest of all the segments, each measured (the definition, O(P K))."""
+    best = np.full(len(points), np.inf)
+    for a, b in zip(polyline[:-1], polyline[1:], strict=True):
+        d = b - a
+        c = np.clip((points - a) @ d / max(d @ d, 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.linalg.norm(points - a - c[:, None] * d, axis=1))
+    return best
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_distance_to_polyline_matches_every_segment_measured(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    # a wiggly path of short steps with a few long jumps (a transfer's knots), repeated vertices
+    steps = rng.normal(scale=0.01, size=(400, 3))
+    steps[rng.choice(400, 5, replace=False)] *= 30.0
+    steps[rng.choice(400, 5, replace=False)] = 0.0
+    polyline = np.cumsum(steps, axis=0)
+    near = polyline[rng.integers(0, 400, 3000)] + rng.normal(scale=0.02, size=(3000, 3))
+    far = rng.uniform(polyline.min(0) - 1.0, polyline.max(0) + 1.0, size=(500, 3))
+    points = np.vstack([near, far])
+    np.testing.assert_allclose(distance_to_polyline(points, polyline), brute_force_distance(points, polyline), atol=1e-12)
