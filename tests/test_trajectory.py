@@ -168,3 +168,8 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     segment = left.segments()[2]
     np.testing.assert_allclose(np.diff(left_warm[segment], 2, axis=0), 0.0, atol=1e-12)
     np.testing.assert_array_equal(left_warm[: segment.start + 1], warm[: segment.start + 1])
+    # no knot missed, but a jump to another IK branch inside segment 0: that segment leaves the sphere
+    jumped = warm.copy()
+    jumped[path.segments()[0].start + 2] += 1.0
+    left, _, _ = pipeline.optimize_path(small_setup, path, jumped, np.zeros(4, np.int64), thetas)
+    assert left.transfers.tolist() == [True, False, False, False]
