@@ -113,8 +113,8 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
             f"the light leaves the sphere between captures {joined} (visiting order): the per-knot IK "
-            "could not follow their great-circle arcs (a knot missed, or a jump to another IK branch) and "
-            "the trajectory NLP found no way on the sphere"
+            "could not follow their great-circle arcs (a knot missed, a jump to another IK branch, or a "
+            "collision) and the trajectory NLP found no way on the sphere"
         )
 
     with stage("timing"):
@@ -186,14 +186,18 @@ def optimize_path(
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path), warm-started at the per-knot IK ``warm``
     (K, n); when it fails, the segments that IK could not follow become transfers: those where it
-    missed a knot (``failures`` (M − 1,)) or jumped further than ``[trajectory] max_step_rad`` between
-    two knots (to another IK branch). On a transfer the light leaves the sphere between two captures,
+    missed a knot (``failures`` (M − 1,)), jumped further than ``[trajectory] max_step_rad`` between
+    two knots (to another IK branch) or, with obstacles, put the arm into one at a knot (a clearance
+    row of the NLPs' sphere model below 0). On a transfer the light leaves the sphere between two captures,
     the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the straight line
     between the captures' ``landmark_thetas``), and the NLP runs again. Returns the path, its warm
     start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such segment,
     or again."""
-    jumps = np.array([np.abs(np.diff(warm[s], axis=0)).max() for s in path.segments()])
+    segments, environment, robot = path.segments(), setup.environment, setup.robot
+    jumps = np.array([np.abs(np.diff(warm[s], axis=0)).max() for s in segments])
     unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
+    if environment is not None and environment.collisions:  # the IK's knots collide on the arc
+        unfollowed |= [min(environment.sphere_clearance(robot, q)[0].min() for q in warm[s]) < 0.0 for s in segments]
     try:
         return path, warm, optimize_knots(setup, path, warm)
     except SolverError:

@@ -173,3 +173,15 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     jumped[path.segments()[0].start + 2] += 1.0
     left, _, _ = pipeline.optimize_path(small_setup, path, jumped, np.zeros(4, np.int64), thetas)
     assert left.transfers.tolist() == [True, False, False, False]
+    # no knot missed, no jump, but the IK's knots collide on segment 3 (by the NLPs' sphere model)
+    colliding_knot = warm[path.segments()[3].start + 1]
+
+    class Colliding:
+        collisions = True
+
+        def sphere_clearance(self, robot, q):
+            return np.array([-0.01 if np.array_equal(q, colliding_knot) else 0.1]), np.zeros(0)
+
+    among_obstacles = replace(small_setup, environment=Colliding())
+    left, _, _ = pipeline.optimize_path(among_obstacles, path, warm, np.zeros(4, np.int64), thetas)
+    assert left.transfers.tolist() == [False, False, False, True]
