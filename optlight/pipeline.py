@@ -185,27 +185,36 @@ def optimize_path(
     setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64], landmark_thetas: Array
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path), warm-started at the per-knot IK ``warm``
-    (K, n); when it fails, the segments that IK could not follow become transfers: those where it
-    missed a knot (``failures`` (M − 1,)), jumped further than ``[trajectory] max_step_rad`` between
-    two knots (to another IK branch) or, with obstacles, put the arm into one at a knot (a clearance
-    row of the NLPs' sphere model below 0). On a transfer the light leaves the sphere between two captures,
-    the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the straight line
-    between the captures' ``landmark_thetas``), and the NLP runs again. Returns the path, its warm
-    start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such segment,
-    or again."""
-    segments, environment, robot = path.segments(), setup.environment, setup.robot
-    jumps = np.array([np.abs(np.diff(warm[s], axis=0)).max() for s in segments])
-    unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
-    if environment is not None and environment.collisions:  # the IK's knots collide on the arc
-        unfollowed |= [min(environment.sphere_clearance(robot, q)[0].min() for q in warm[s]) < 0.0 for s in segments]
+    (K, n); when it fails, the segments that IK could not follow (:func:`unfollowed_segments`)
+    become transfers: the light leaves the sphere between their captures, the arm moving in joint
+    space (:attr:`LightPath.transfers`, warm-started on the straight line between the captures'
+    ``landmark_thetas``), and the NLP runs again. Returns the path, its warm start and the NLP's
+    result; raises :class:`SolverError` when the NLP fails with no such segment, or again."""
     try:
         return path, warm, optimize_knots(setup, path, warm)
     except SolverError:
+        unfollowed = unfollowed_segments(setup, path, warm, failures)
         if not unfollowed.any():
             raise
     path = path.with_transfers(unfollowed)
     warm, _ = knot_ik(setup, path, landmark_thetas)
     return path, warm, optimize_knots(setup, path, warm)
+
+
+def unfollowed_segments(
+    setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64]
+) -> NDArray[np.bool_]:
+    """(M − 1,) the segments whose arc the per-knot IK ``warm`` (K, n) did not follow: where it missed
+    a knot (``failures`` (M − 1,)), jumped further than ``[trajectory] max_step_rad`` between two
+    knots (to another IK branch) or, with obstacles, put the arm into one at a knot (a clearance row
+    of the NLPs' sphere model below 0)."""
+    segments, environment = path.segments(), setup.environment
+    jumps = np.array([np.abs(np.diff(warm[s], axis=0)).max() for s in segments])
+    unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
+    if environment is not None and environment.collisions:
+        clearance = np.array([environment.sphere_clearance(setup.robot, q)[0].min() for q in warm])
+        unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments])
+    return unfollowed
 
 
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
