@@ -37,6 +37,7 @@ which does not overflow) and ``τ`` its width (``softness``).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,15 +103,27 @@ class SoftHistogram:
         return self.sigma_bins * self.width
 
     def numpy(self, u: ArrayLike) -> Array:
-        """Histogram(s) of ``u`` with shape (..., P) -> (..., K), each summing to 1."""
+        """Histogram(s) of ``u`` with shape (..., P) -> (..., K), each summing to 1.
+
+        Σ_p exp(−(a_p − b_k)²) with a = u/(σ√2), b = c/(σ√2), evaluated in place on chunks of at
+        most :data:`_BATCH_FLOATS` kernel values: whole rows of a batch, or pixel slices of one large
+        image (a 256² image's 29k object pixels × 32 bins in one piece ran 3× slower, out of cache).
+        """
         u = np.asarray(u, float)
         batch = u.reshape(-1, u.shape[-1])
-        out = np.empty((batch.shape[0], self.bins))
-        step = max(1, _BATCH_FLOATS // (batch.shape[1] * self.bins))
-        c, s = self.centres, self.sigma
-        for i in range(0, batch.shape[0], step):
-            d = (batch[i : i + step, :, None] - c) / s
-            out[i : i + step] = np.exp(-0.5 * d * d).sum(axis=1)
+        n_rows, n_pixels = batch.shape
+        scale = math.sqrt(0.5) / self.sigma
+        a, b = batch * scale, self.centres * scale
+        out = np.zeros((n_rows, self.bins))
+        rows = max(1, _BATCH_FLOATS // (n_pixels * self.bins))
+        cols = n_pixels if rows > 1 else max(1, _BATCH_FLOATS // self.bins)
+        for i in range(0, n_rows, rows):
+            for j in range(0, n_pixels, cols):
+                kernel = a[i : i + rows, j : j + cols, None] - b
+                np.square(kernel, out=kernel)
+                np.negative(kernel, out=kernel)
+                np.exp(kernel, out=kernel)
+                out[i : i + rows] += kernel.sum(axis=1)
         out /= out.sum(axis=1, keepdims=True)
         return out.reshape(*u.shape[:-1], self.bins)
 

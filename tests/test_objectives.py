@@ -113,6 +113,17 @@ def test_soft_histogram_of_a_tiny_image_against_hand_computed_bins() -> None:
     )
 
 
+def test_soft_histogram_chunks_agree_with_the_kernel_matrix_in_one_piece() -> None:
+    # One image larger than a chunk (split by pixels) and a batch split by rows with a short last
+    # chunk: both against Σ_p exp(−(u_p − c_k)²/2σ²) over the whole P×K matrix at once.
+    hist = SoftHistogram(bins=32, sigma_bins=1.0)
+    rng = np.random.default_rng(5)
+    for shape in [(20_000,), (5, 3_000)]:
+        u = rng.uniform(-0.05, 1.05, shape)
+        kernel = np.exp(-0.5 * ((u[..., None] - hist.centres) / hist.sigma) ** 2).sum(axis=-2)
+        np.testing.assert_allclose(hist.numpy(u), kernel / kernel.sum(axis=-1, keepdims=True), rtol=1e-12)
+
+
 def test_distances_vanish_at_the_reference_and_emd_is_the_cdf_l1() -> None:
     u = random_u(3)
     h = HIST.numpy(u)
