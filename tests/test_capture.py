@@ -116,6 +116,34 @@ def test_calibration_recovers_power_ambient_and_gamma_to_2_percent(face_scene: S
     assert calibration.normal_deviation_deg is not None and calibration.normal_deviation_deg < 3.0
 
 
+@pytest.mark.parametrize(("world_model", "model"), [("point", "directional"), ("directional", "point")])
+def test_calibration_chooses_the_light_model_the_captures_follow(face_scene: Scene, world_model: str, model: str) -> None:
+    """Captures of a world whose light falls off as the other model's: the calibration of the model
+    scene switches its light model, and then recovers power and γ as with the right one."""
+    light = face_scene.light
+    scene = face_scene.calibrated(dataclasses.replace(light, model=model), face_scene.gbuffer.albedo)
+    world_scene = face_scene.calibrated(dataclasses.replace(light, model=world_model), face_scene.gbuffer.albedo)
+    world = WorldSpec(power_scale=1.3, ambient=0.08, gamma=2.2, noise_std=0.005, seed=3)
+    calibration = calibrate(scene, captures_of(ModelCamera(world_scene, world), scene), LoopSpec())
+    assert calibration.light_model == world_model
+    assert calibration.model_residual_rms[world_model] < 0.5 * calibration.model_residual_rms[model]
+    assert calibration.power == pytest.approx(1.3, rel=0.02)
+    assert calibration.gamma == pytest.approx(2.2, rel=0.02)
+    assert calibration.light(scene.light).model == world_model
+
+
+def test_calibration_takes_a_small_mitsuba_lamp_for_a_point_light() -> None:
+    """A 1 cm sphere lamp rendered by Mitsuba (32 spp) falls off as 1/r²: the directional model's
+    calibration chooses the point model, and its γ stays the linear camera's (the directional fit
+    bends γ to absorb the falloff)."""
+    problem = sphere_problem("directional", light_radius_m=0.01, spp=32)
+    scene = Scene.from_problem(problem)
+    calibration = calibrate(scene, captures_of(MitsubaCamera(scene, problem.world), scene), LoopSpec())
+    assert calibration.light_model == "point"
+    assert calibration.gamma == pytest.approx(1.0, abs=0.05)
+    assert calibration.power == pytest.approx(1.0, rel=0.05)
+
+
 def test_saturated_and_black_captures_are_reported_and_left_out(face_scene: Scene) -> None:
     world = WorldSpec(power_scale=1.3, ambient=0.08, gamma=1.5)
     good = captures_of(ModelCamera(face_scene, world), face_scene)

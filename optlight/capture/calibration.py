@@ -27,7 +27,12 @@ Robust fit:
    on log γ);
 4. entries brighter than the fit by more than ``specular_mad`` robust deviations (1.4826 × the
    median absolute deviation of the linear residual, at least 0.1 % of s) are specular highlights:
-   left out, and steps 3–4 repeated (three rounds).
+   left out, and steps 3–4 repeated (three rounds);
+5. steps 2–4 run with the shading of each light model (:data:`LIGHT_MODELS`: directional, f = 1,
+   and point, f = (b/r)²), and the model whose fit leaves the smaller recorded-value residual on the
+   entries both fits used is kept. A lamp at 0.4 m is a point light to the camera: the falloff across
+   a 10 cm deep face is up to ~1.8×, which a directional model can only absorb into a wrong γ (a 5 cm
+   disk lamp in the physically based camera calibrated to γ = 0.41 with the directional model).
 
 Normals: where three or more used lights light a pixel, photometric stereo
 (:func:`optlight.photometric_stereo.recover_normals`, distant lights from O, strength A, the fitted
@@ -40,7 +45,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -61,13 +66,17 @@ GAMMA_RANGE = (0.25, 4.0)
 ROUNDS, SWEEPS = 3, 40
 #: Smallest robust deviation of the specular test, as a fraction of the saturation value s.
 MAD_FLOOR = 1e-3
+#: The light models the calibration chooses between (module docstring, step 5).
+LIGHT_MODELS: tuple[Literal["directional", "point"], ...] = ("directional", "point")
 
 
 @dataclass(frozen=True, eq=False)
 class Calibration:
     """The result of :func:`calibrate`.
 
-    ``power`` E and ``ambient`` k_amb (the model's gain kept), ``gamma`` γ; ``albedo_factor`` c (P,),
+    ``light_model`` the light model that fits the captures best and ``model_residual_rms`` each
+    model's residual on the entries both used (step 5); ``power`` E and ``ambient`` k_amb (the
+    model's gain kept), ``gamma`` γ; ``albedo_factor`` c (P,),
     1 where ``albedo_calibrated`` is False (a pixel without two used entries); ``normals`` (P, 3):
     photometric stereo's where ``normals_valid``, the mesh's elsewhere (None with fewer than 3 used
     captures); ``normal_deviation_deg``: median angle between them and the mesh's; ``used``: indices of
@@ -76,6 +85,8 @@ class Calibration:
     (len(used), P): the entries left out as specular;
     ``residual_rms``: of Y − Ŷ over the used entries (renderer units)."""
 
+    light_model: Literal["directional", "point"]
+    model_residual_rms: dict[str, float]
     power: float
     ambient: float
     gamma: float
@@ -91,13 +102,15 @@ class Calibration:
     specular: NDArray[np.bool_]
 
     def light(self, model: LightSpec) -> LightSpec:
-        """The model's light with the calibrated power and ambient."""
-        return dataclasses.replace(model, power=self.power, ambient=self.ambient)
+        """The model's light with the calibrated light model, power and ambient."""
+        return dataclasses.replace(model, model=self.light_model, power=self.power, ambient=self.ambient)
 
     def to_dict(self) -> dict[str, Any]:
         """The calibrated parameters and the fit's statistics, JSON-safe (no per-pixel arrays)."""
         c = self.albedo_factor[self.albedo_calibrated]
         return {
+            "light_model": self.light_model,
+            "model_residual_rms": dict(self.model_residual_rms),
             "power": self.power,
             "ambient": self.ambient,
             "gamma": self.gamma,
@@ -160,13 +173,75 @@ def calibrate(scene: Scene, captures: Sequence[Capture], spec: LoopSpec) -> Cali
         )
     y = recorded[list(used)]
     positions = np.array([captures[k].light_position for k in used], float)
+    fits = {m: _robust_fit(_with_light_model(scene, m), y, positions, spec) for m in LIGHT_MODELS}
+    both = np.logical_and.reduce([f.weights for f in fits.values()])
+    residual: dict[str, float] = {
+        m: float(np.sqrt(np.mean((y - respond(f.fit.prediction, s, f.fit.gamma))[both] ** 2))) if both.any() else np.inf
+        for m, f in fits.items()
+    }
+    model = min(LIGHT_MODELS, key=lambda m: (residual[m], m != scene.light.model))
+    chosen = fits[model]
+    fit, weights = chosen.fit, chosen.weights
+    normals, valid, deviation = _normals(chosen.scene, y, positions, fit, spec)
+    return Calibration(
+        light_model=model,
+        model_residual_rms=residual,
+        power=fit.a / g,
+        ambient=max(fit.b, 0.0) / g,
+        gamma=fit.gamma,
+        albedo_factor=fit.c,
+        albedo_calibrated=fit.calibrated,
+        normals=normals,
+        normals_valid=valid,
+        normal_deviation_deg=deviation,
+        used=used,
+        rejected=rejected,
+        entries={
+            "used": int(weights.sum()),
+            "saturated": int((~chosen.unsaturated).sum()),
+            "shadowed": int((chosen.unsaturated & ~chosen.geometric).sum()),
+            "specular": int(chosen.specular.sum()),
+        },
+        residual_rms=float(np.sqrt(fit.cost / max(int(weights.sum()), 1))),
+        specular=chosen.specular,
+    )
+
+
+def _with_light_model(scene: Scene, model: Literal["directional", "point"]) -> Scene:
+    """``scene`` with its light's model set to ``model`` (itself when it already is)."""
+    if scene.light.model == model:
+        return scene
+    return scene.calibrated(dataclasses.replace(scene.light, model=model), scene.gbuffer.albedo)
+
+
+@dataclass(frozen=True)
+class _RobustFit:
+    """Steps 2–4 with one light model: the ``scene`` with that model, the last ``fit``, the entries
+    not saturated, the ones clearly lit or clearly in attached shadow (``geometric``), the ones left
+    out as ``specular`` and the ``weights`` (entries used)."""
+
+    scene: Scene
+    fit: _Fit
+    unsaturated: NDArray[np.bool_]
+    geometric: NDArray[np.bool_]
+    specular: NDArray[np.bool_]
+
+    @property
+    def weights(self) -> NDArray[np.bool_]:
+        return self.unsaturated & self.geometric & ~self.specular
+
+
+def _robust_fit(scene: Scene, y: Array, positions: Array, spec: LoopSpec) -> _RobustFit:
+    """Steps 2–4 of the module docstring for the recorded values ``y`` (K, P) of lights at
+    ``positions`` (K, 3) with ``scene``'s light model."""
+    light = scene.light
+    s, g = light.saturation, light.gain
     shade, lit_cos, cos = (np.array(v) for v in zip(*(shading(scene, a) for a in positions), strict=True))
     unsaturated = y / s < spec.saturation_level
-    lit = lit_cos >= spec.min_cosine
-    dark = cos <= -spec.min_cosine
-    geometry = unsaturated & (lit | dark)
+    geometric = (lit_cos >= spec.min_cosine) | (cos <= -spec.min_cosine)
+    geometry = unsaturated & geometric
     specular = np.zeros_like(geometry)
-    rho = gb.albedo
+    rho = scene.gbuffer.albedo
     fit: _Fit | None = None
     for _ in range(ROUNDS):
         weights = geometry & ~specular
@@ -185,28 +260,7 @@ def calibrate(scene: Scene, captures: Sequence[Capture], spec: LoopSpec) -> Cali
             break
         specular = new
     assert fit is not None
-    weights = geometry & ~specular
-    normals, valid, deviation = _normals(scene, y, positions, fit, spec)
-    return Calibration(
-        power=fit.a / g,
-        ambient=max(fit.b, 0.0) / g,
-        gamma=fit.gamma,
-        albedo_factor=fit.c,
-        albedo_calibrated=fit.calibrated,
-        normals=normals,
-        normals_valid=valid,
-        normal_deviation_deg=deviation,
-        used=used,
-        rejected=rejected,
-        entries={
-            "used": int(weights.sum()),
-            "saturated": int((~unsaturated).sum()),
-            "shadowed": int((unsaturated & ~(lit | dark)).sum()),
-            "specular": int(specular.sum()),
-        },
-        residual_rms=float(np.sqrt(fit.cost / max(int(weights.sum()), 1))),
-        specular=specular,
-    )
+    return _RobustFit(scene, fit, unsaturated, geometric, specular)
 
 
 @dataclass(frozen=True)
