@@ -15,11 +15,11 @@ import pytest
 from conftest import reduced_problem
 
 import optlight
-from optlight.environment import LIGHT, VIEW_CONE, Environment
+from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
 from optlight.planning.landmarks import Landmark
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
-from optlight.planning.policy import place_landmarks
+from optlight.planning.policy import Reacher, place_landmarks
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
@@ -282,3 +282,19 @@ def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     message = str(error.value)
     assert "azimuth 157.5°" in message and f"↔ {VIEW_CONE}" in message
     assert "nor is any light on its azimuth clear of the environment" in message
+
+
+def test_an_ik_posture_on_the_edge_of_a_row_is_not_a_capture_posture(small_setup: Setup) -> None:
+    """The default cell, light at zenith 22°, azimuth 320°: the IK's arm keeps the view cone by
+    0.2 mm only. The trajectory NLP pins a capture, and a posture on a row's bound left it no
+    interior (a re-plan of the camera loop failed infeasible on one); the reacher keeps the capture
+    posture CAPTURE_SLACK clear instead, the light where it was."""
+    robot, env = small_setup.robot, small_setup.environment
+    assert env is not None
+    light = small_setup.sphere.position(math.radians(22.0), math.radians(320.0))
+    attempt = Reacher(small_setup).attempt(light, robot.theta_ref)
+    row, _ = env.worst_sphere_row(robot, attempt.ik.theta)
+    assert attempt.ik.success and 0.0 <= row < CAPTURE_SLACK  # the case: clear, but on the edge
+    assert attempt.theta is not None
+    assert env.worst_sphere_row(robot, attempt.theta)[0] >= CAPTURE_SLACK - 1e-6  # IPOPT's tolerance
+    assert np.linalg.norm(robot.light_pose(attempt.theta)[0] - light) <= POSE_TOL

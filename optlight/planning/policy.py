@@ -3,9 +3,10 @@
 For a light position a* on the sphere:
 
 1. the generalized IK (5-D task, roll free; :func:`~optlight.robot.generalized_ik`) from a start;
-2. with an environment, where the IK's joint angles break a row of the NLPs' sphere model
-   (:meth:`Environment.worst_sphere_row`: clearance, and the view cone, a light being a capture), the
-   nearest clear posture for the same light (:class:`~optlight.planning.placement.ClearPosture`), from
+2. with an environment, where the IK's joint angles leave a row of the NLPs' sphere model
+   (:meth:`Environment.worst_sphere_row`: clearance, and the view cone, a light being a capture)
+   below :data:`~optlight.environment.CAPTURE_SLACK` (the trajectory NLP pins the capture, and a
+   posture on a row's bound leaves it no interior there), the nearest clear posture for the same light (:class:`~optlight.planning.placement.ClearPosture`), from
    the IK's angles, then from the start: a redundant arm has other postures for one light.
 
 :class:`Reacher` does that (built once per setup; its NLPs on first need), and the reachability map
@@ -26,6 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from optlight.environment import CAPTURE_SLACK
 from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
 from optlight.planning.landmarks import Landmark
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
@@ -80,7 +82,7 @@ class Reacher:
         if environment is None:
             return Attempt(ik, math.inf, "", ik.theta)
         clearance, row = environment.worst_sphere_row(setup.robot, ik.theta)
-        if clearance >= 0.0:
+        if clearance >= CAPTURE_SLACK:
             return Attempt(ik, clearance, row, ik.theta)
         if self._posture is None:
             self._posture = ClearPosture(setup, environment)
@@ -155,7 +157,7 @@ def place_landmarks(
             f"out of reach of {robot.name}: {best.ik.message}"
             if not best.ik.success
             else f"blocked for {robot.name}: its IK solution brings {best.row} "
-            f"{-best.clearance * 1e3:.1f} mm too close, and no posture near it is clear"
+            f"{too_close_mm(best.clearance):.1f} mm too close, and no posture near it is clear"
         )
         where = (
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
@@ -176,7 +178,13 @@ def why_moved(setup: Setup, best: Attempt) -> str:
     environment (… was … mm too close)"."""
     if not best.ik.success:
         return f"to be reachable by {setup.robot.name}"
-    return f"to clear the environment ({best.row} was {-best.clearance * 1e3:.1f} mm too close)"
+    return f"to clear the environment ({best.row} was {too_close_mm(best.clearance):.1f} mm too close)"
+
+
+def too_close_mm(clearance: float) -> float:
+    """How far (mm) a row of ``clearance`` (m) falls short of what a capture keeps,
+    :data:`~optlight.environment.CAPTURE_SLACK`."""
+    return (CAPTURE_SLACK - clearance) * 1e3
 
 
 class AzimuthPlacement:
