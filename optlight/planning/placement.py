@@ -407,7 +407,12 @@ class ClearPosture:
         )
         self._lbg = np.r_[np.zeros(5), np.full(g.size1() - 5, CAPTURE_SLACK)]  # 5 equalities, then rows
         self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
-        options = ipopt_options(setup.solver, ipopt__hessian_approximation="exact")
+        # Most solves of a light the arm cannot hold clear are infeasible (rti_dome: 320 of 338):
+        # IPOPT told to expect that gives up after a median 30 iterations instead of 93 (rti_dome's
+        # placement 22 s -> 8 s), and the solves that succeed succeed as before (the same 18 there).
+        options = ipopt_options(
+            setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
+        )
         nlp: dict[str, Any] = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
         self.nlp = ca.nlpsol("clear_posture", "ipopt", nlp, options)
 
