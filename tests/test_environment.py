@@ -10,7 +10,7 @@ import pinocchio as pin
 import pytest
 import trimesh
 
-from optlight.environment import Ball, Box, Cylinder, Environment, HalfSpace, ViewCone
+from optlight.environment import Ball, Box, Cylinder, Environment, HalfSpace, ViewCone, spheres
 from optlight.environment.check import EXACT_BAND_M
 from optlight.environment.collision import LIGHT
 from optlight.environment.shapes import SMOOTHING_M, rotation_rpy_deg
@@ -170,6 +170,30 @@ def test_spheres_cover_every_collision_mesh_vertex_and_surface(env, robot) -> No
         pts = np.concatenate(points)
         inside = np.linalg.norm(pts[:, None, :] - centres[None], axis=2) <= radii[None] + 1e-9
         assert inside.any(axis=1).all(), f"{body.name}: {np.sum(~inside.any(axis=1))} points outside"
+
+
+def test_sphere_fits_are_read_back_from_the_disk_cache(tmp_path, monkeypatch) -> None:
+    surfaces = [trimesh.creation.box(extents=[0.2, 0.05, 0.04]), trimesh.creation.icosphere(radius=0.03)]
+    surfaces[1].apply_translation([0.1, 0.0, 0.02])
+    monkeypatch.setenv("OPTLIGHT_CACHE", str(tmp_path))
+    centers, radii = spheres.fit_spheres(surfaces, 3)
+    (entry,) = (tmp_path / "spheres").glob("*.npz")
+
+    def fail(*args, **kwargs):
+        raise AssertionError("fitted again instead of read from the cache")
+
+    monkeypatch.setattr(spheres, "_fit", fail)
+    again = spheres.fit_spheres(surfaces, 3)
+    np.testing.assert_array_equal(again[0], centers)
+    np.testing.assert_array_equal(again[1], radii)
+    # another sphere count, or moved surfaces, are other entries; a damaged file is fitted again
+    with pytest.raises(AssertionError, match="fitted again"):
+        spheres.fit_spheres(surfaces, 2)
+    with pytest.raises(AssertionError, match="fitted again"):
+        spheres.fit_spheres([surfaces[0].copy().apply_translation([0.0, 0.0, 1e-3]), surfaces[1]], 3)
+    entry.write_bytes(b"not an npz")
+    with pytest.raises(AssertionError, match="fitted again"):
+        spheres.fit_spheres(surfaces, 3)
 
 
 # ------------------------------------------------------------------------------------ NLP functions

@@ -10,6 +10,7 @@ import trimesh
 from scipy.spatial import cKDTree
 from test_preview import packed_array
 
+from optlight.cache import cache_folder
 from optlight.robot import load_robot
 from optlight.viz import meshes
 from optlight.viz.meshes import CompactMeshGeometry, decimate, display_mesh
@@ -104,7 +105,7 @@ def test_display_meshes_are_cached_on_disk(panda_visual, tmp_path, monkeypatch):
     display_mesh(finger, max_faces=100)
     assert len(list((tmp_path / "meshes").glob("*.npz"))) == 2
     monkeypatch.setenv("OPTLIGHT_CACHE", "")
-    assert meshes.cache_folder() is None
+    assert cache_folder("meshes") is None
     cached.write_bytes(b"not an npz")  # a damaged file is computed again and replaced
     monkeypatch.setenv("OPTLIGHT_CACHE", str(tmp_path))
     meshes._display_mesh.cache_clear()

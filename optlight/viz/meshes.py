@@ -8,15 +8,12 @@ surface's normals (:func:`display_mesh`), and are packed with 8-bit colours and 
 indices where they fit (:class:`CompactMeshGeometry`): 0.9 MB for the Panda.
 
 Decimating the Panda's meshes takes about 2.5 s, so :func:`display_mesh` keeps each result in memory
-and on disk (:func:`cache_folder`), keyed by the file's path, size and modification time: only the
+and on disk (:func:`optlight.cache.cached_arrays`), keyed by the file's path, size and modification time: only the
 first preview of a robot on a machine pays it.
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -29,6 +26,8 @@ import trimesh
 import umsgpack
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
+
+from optlight.cache import cached_arrays
 
 Array = NDArray[np.float64]
 
@@ -181,19 +180,13 @@ def _display_mesh(
     max_faces: int,
 ) -> DisplayMesh:
     """:func:`display_mesh` from the disk cache, else computed and written there."""
-    folder = cache_folder()
-    cached = folder / f"{hashlib.sha256(key.encode()).hexdigest()[:32]}.npz" if folder else None
-    mesh = None
-    if cached is not None and cached.exists():
-        try:
-            with np.load(cached) as data:
-                mesh = DisplayMesh(data["vertices"], data["faces"], data["normals"], data["colors"])
-        except (OSError, ValueError, KeyError):
-            mesh = None  # a damaged cache file: computed again below and replaced
-    if mesh is None:
+
+    def compute() -> dict[str, NDArray[Any]]:
         mesh = _build_display_mesh(file, np.asarray(scale), color, default_color, max_faces)
-        if cached is not None:
-            _write_atomically(cached, mesh)
+        return {"vertices": mesh.vertices, "faces": mesh.faces, "normals": mesh.normals, "colors": mesh.colors}
+
+    data = cached_arrays("meshes", key, compute)
+    mesh = DisplayMesh(data["vertices"], data["faces"], data["normals"], data["colors"])
     for array in (mesh.vertices, mesh.faces, mesh.normals, mesh.colors):
         array.setflags(write=False)
     return mesh
@@ -242,36 +235,3 @@ def _part_color(part: trimesh.Trimesh, default: tuple[float, ...]) -> tuple[floa
     if isinstance(visual, trimesh.visual.ColorVisuals) and visual.kind == "face":
         return tuple((np.asarray(visual.face_colors, float)[:, :3].mean(axis=0) / 255.0).tolist())
     return default
-
-
-def cache_folder() -> Path | None:
-    """Where display meshes are cached: ``$OPTLIGHT_CACHE/meshes`` (``OPTLIGHT_CACHE`` set but empty:
-    no disk cache), else ``$XDG_CACHE_HOME/optlight/meshes``, else ``~/.cache/optlight/meshes``;
-    None when it cannot be created (each run then computes the meshes again)."""
-    configured = os.environ.get("OPTLIGHT_CACHE")
-    if configured == "":
-        return None
-    if configured is not None:
-        folder = Path(configured) / "meshes"
-    else:
-        folder = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "optlight" / "meshes"
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return None
-    return folder
-
-
-def _write_atomically(path: Path, mesh: DisplayMesh) -> None:
-    """Write ``mesh`` to ``path`` (npz) through a temporary file and a rename, so that a concurrent
-    reader never sees half a file; where the cache cannot be written, nothing is."""
-    try:
-        handle, name = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-    except OSError:
-        return
-    try:
-        with os.fdopen(handle, "wb") as out:
-            np.savez(out, vertices=mesh.vertices, faces=mesh.faces, normals=mesh.normals, colors=mesh.colors)
-        os.replace(name, path)
-    except OSError:
-        Path(name).unlink(missing_ok=True)
