@@ -4,6 +4,7 @@ moves a landmark the robot cannot reach along its azimuth, or names it when noth
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from typing import Any
@@ -19,7 +20,7 @@ from optlight.geometry import h_residual
 from optlight.planning import placement as placement_module
 from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
 from optlight.planning.placement import LightPlacement, PlacementResult
-from optlight.planning.policy import place_landmarks
+from optlight.planning.policy import Reacher, place_landmarks
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -220,6 +221,32 @@ def test_unreachable_landmark_moves_along_its_azimuth(low: Case) -> None:
         assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < accuracy
         np.testing.assert_allclose(position, lm.position, atol=accuracy)
         assert robot.within_limits(theta, tol=0.0)
+
+
+def test_the_azimuth_placement_tries_the_previous_capture_last(low: Case) -> None:
+    """Where the NLP fails from both IK attempts' angles (the camera loop's strong-ambient re-plan:
+    the IK missed the light from both starts, and from its angles, 8 cm off the sphere, IPOPT found
+    the azimuth infeasible), it starts from the previous capture's clear angles; those failures are
+    imposed here on the first two starts of landmark 1, which is out of reach."""
+    reacher = Reacher(low.setup)
+    placement, starts = reacher.placement, []
+    solve = placement.solve
+
+    def failing_first_two(azimuth: float | None, theta0: Any) -> PlacementResult:
+        starts.append(np.array(theta0, float))
+        result = solve(azimuth, theta0)
+        return result if len(starts) > 2 else dataclasses.replace(result, success=False, message="imposed")
+
+    placement.solve = failing_first_two  # type: ignore[method-assign]
+    first, lm = low.landmarks.landmarks[0], low.landmarks.landmarks[1]
+    placed = place_landmarks(low.setup, [first, lm], reacher)
+    assert len(starts) == 3
+    # the third start holds the previous capture's light (its angles, before the placement's follow-back)
+    np.testing.assert_allclose(low.robot.light_pose(starts[2])[0], first.position, atol=1e-6)
+    assert [m.status for m in placed.landmarks][1] == "placed"
+    position, rotation = low.robot.light_pose(placed.thetas[1])
+    assert np.abs(h_residual(position, rotation, low.sphere.center, low.sphere.radius)).max() < 1e-8
+    np.testing.assert_allclose(position, placed.landmarks[1].position, atol=1e-9)
 
 
 def test_the_pipeline_plans_through_moved_landmarks(low: Case) -> None:

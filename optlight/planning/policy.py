@@ -189,7 +189,7 @@ def too_close_mm(clearance: float) -> float:
 
 class AzimuthPlacement:
     """The default :data:`Replacement`: the placement NLP on the landmark's azimuth, from the best
-    attempt's IK angles, then from the other's; when it succeeds the landmark is replaced by the best
+    attempt's IK angles, then from the other's, then from the previous capture's; when it succeeds the landmark is replaced by the best
     light the robot reaches clear on that azimuth, kept off the singular reach boundary (status
     "placed", its cost)."""
 
@@ -201,9 +201,14 @@ class AzimuthPlacement:
         self, lm: Landmark, attempts: Sequence[Attempt], previous: Array
     ) -> tuple[Landmark, Array, str] | str:
         placement = self.reacher.placement
-        placed = placement.solve(lm.azimuth, attempts[0].ik.theta)
-        if not placed.success and attempts[1:]:
-            other = placement.solve(lm.azimuth, attempts[1].ik.theta)
+        # the previous capture's clear angles last: where the IK failed, its angles can lie far
+        # from any posture that holds the light on the sphere, and the NLP fails from them
+        starts = [a.ik.theta for a in attempts] + [previous]
+        placed = placement.solve(lm.azimuth, starts[0])
+        for start in starts[1:]:
+            if placed.success:
+                break
+            other = placement.solve(lm.azimuth, start)
             placed = other if other.success else placed
         sphere = self.setup.sphere
         if not placed.success:
