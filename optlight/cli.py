@@ -189,6 +189,12 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
             f"{it.wall_time_s:.1f} s"
         )
+    calibration = acquisition.calibration
+    if calibration is not None:
+        console.print(
+            f"calibrated model: {calibration.light_model} light, power {calibration.power:.3g}, ambient "
+            f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
+        )
     best = acquisition.best
     console.print(
         f"{acquisition.status}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "

@@ -179,6 +179,8 @@ def test_cli_acquire(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert (out / "acquisition.json").is_file() and (out / "captures.csv").is_file()
     captured = capsys.readouterr()
     assert "iteration 1: measured cost" in captured.out and captured.err == ""  # progress on stdout
+    calibrated = json.loads((out / "calibration.json").read_text())
+    assert f"calibrated model: {calibrated['light_model']} light, power {calibrated['power']:.3g}" in captured.out
     # an earlier output is refused in one line without --force, nothing touched
     before = sorted(p.name for p in out.iterdir())
     assert cli.main(["acquire", str(problem), "--out", str(out)]) == 2
