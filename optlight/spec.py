@@ -665,25 +665,23 @@ def image_names(pattern: str, count: int) -> list[str]:
     return names
 
 
-#: Peak memory of a solve, measured as the growth of ru_maxrss on the default problem (whole solves
-#: at 256²–1024² pixels with 32 bins; the landmark search at 512² with 32–1024 bins): a fixed part
-#: (the libraries, the robot, the NLPs) plus, per object pixel at the camera's resolution, about 800
-#: bytes (rays, G-buffer, the CasADi luminance model's constant matrices) and 72 bytes per histogram
-#: bin (the soft histogram's pixels × bins arrays). The constants below round those up; every image
-#: pixel is counted as an object pixel, since the object may fill the image.
+#: Peak memory of a solve: a fixed part (the libraries, the robot, the NLPs; ~250 MB over the
+#: imports) plus a part per object pixel at the camera's resolution (rays, G-buffer, images). Whole
+#: solves of the default problem grew by ~800 bytes per pixel at 256²–1024² when measured two stops
+#: ago, ~80 at 128²–320² now; the constant keeps the larger (temporaries of the G-buffer's rays grow
+#: with the image). The soft histogram no longer adds bytes per pixel and bin: its NumPy kernel runs
+#: in chunks of fixed size (0.9 byte per pixel and bin measured, 32 → 128 bins at 320²; it was 72).
+#: Every image pixel is counted as an object pixel, since the object may fill the image.
 MEMORY_BASE_BYTES = 600e6
 MEMORY_BYTES_PER_PIXEL = 1200.0
-MEMORY_BYTES_PER_PIXEL_BIN = 80.0
 #: Fraction of the available memory a run may plan to use (the rest: other processes, estimate error).
 MEMORY_SAFETY = 0.8
 
 
 def estimated_peak_memory(problem: Problem) -> float:
     """Bytes a solve of ``problem`` is expected to hold at its peak (see :data:`MEMORY_BASE_BYTES`):
-    base + W·H·(per pixel + per pixel and bin · objective.bins)."""
-    pixels = problem.camera.width * problem.camera.height
-    per_pixel = MEMORY_BYTES_PER_PIXEL + MEMORY_BYTES_PER_PIXEL_BIN * problem.objective.bins
-    return MEMORY_BASE_BYTES + pixels * per_pixel
+    base + W·H·per pixel."""
+    return MEMORY_BASE_BYTES + problem.camera.width * problem.camera.height * MEMORY_BYTES_PER_PIXEL
 
 
 def available_memory() -> float | None:

@@ -238,12 +238,12 @@ print(status("VmHWM:") - before)
 
 
 def test_memory_estimate_bounds_the_measured_growth() -> None:
-    """The estimate's per-pixel and per-pixel-and-bin rates bound (and are within 10× of) those of
-    the heaviest part, the Setup (camera-resolution scene and objective) and the landmark search
-    (its search renders, the reported costs at the camera's resolution), measured
-    as its peak resident memory above what the process held before it (Linux: VmHWM reset through
-    /proc/self/clear_refs), in fresh processes at two sizes and two bin counts."""
-    from optlight.spec import MEMORY_BYTES_PER_PIXEL, MEMORY_BYTES_PER_PIXEL_BIN
+    """The estimate's per-pixel rate bounds that of the Setup (camera-resolution scene and
+    objective) and the landmark search (its search renders, the reported costs at the camera's
+    resolution), measured as its peak resident memory above what the process held before it (Linux:
+    VmHWM reset through /proc/self/clear_refs), in fresh processes at two sizes; and more histogram
+    bins cost next to nothing per pixel (the NumPy kernel is chunked)."""
+    from optlight.spec import MEMORY_BYTES_PER_PIXEL
 
     def growth(n: int, bins: int) -> float:
         run = subprocess.run(
@@ -254,10 +254,8 @@ def test_memory_estimate_bounds_the_measured_growth() -> None:
 
     small, large, many_bins = growth(128, 32), growth(320, 32), growth(320, 128)
     per_pixel = (large - small) / (320**2 - 128**2)
-    estimate = MEMORY_BYTES_PER_PIXEL + 32 * MEMORY_BYTES_PER_PIXEL_BIN
-    assert 0.1 * estimate <= per_pixel <= estimate, (small, large, many_bins)
-    per_pixel_bin = (many_bins - large) / (96 * 320**2)
-    assert 0.1 * MEMORY_BYTES_PER_PIXEL_BIN <= per_pixel_bin <= MEMORY_BYTES_PER_PIXEL_BIN
+    assert 0 < per_pixel <= MEMORY_BYTES_PER_PIXEL, (small, large, many_bins)
+    assert (many_bins - large) / (96 * 320**2) <= 2.0  # bytes per pixel and bin (was ~72 unchunked)
 
 
 def test_a_camera_whose_solve_does_not_fit_names_the_key(monkeypatch: pytest.MonkeyPatch) -> None:
