@@ -14,7 +14,7 @@ from optlight.pipeline import time_knots, verify_knots
 from optlight.plan import joint_path_length
 from optlight.planning.path import build_path
 from optlight.planning.policy import knot_ik
-from optlight.planning.trajectory import TrajectoryOptimizer
+from optlight.planning.trajectory import TrajectoryNLPResult, TrajectoryOptimizer, knot_cost
 from optlight.robot import generalized_ik
 from optlight.setup import Setup
 from optlight.verify import verify_trajectory
@@ -153,17 +153,18 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     thetas = warm[path.landmark_knots]
     seen = []
 
-    def on_the_sphere_fails(setup_, path_, warm_):
+    def on_the_sphere_fails(setup_, path_, warm_, fixed):
         seen.append(path_.transfers.copy())
         if not path_.transfers.any():
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
-        return "solved"
+        return TrajectoryNLPResult(warm_, True, "solved", 0.0, 0.0, 1, 0.0)
 
     monkeypatch.setattr(pipeline, "optimize_knots", on_the_sphere_fails)
+    monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", path.n_knots)  # one window: the whole path
     with pytest.raises(SolverError):  # no knot the per-knot IK missed: nowhere to leave the sphere
         pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), thetas)
     left, left_warm, result = pipeline.optimize_path(small_setup, path, warm, np.array([0, 0, 3, 0]), thetas)
-    assert result == "solved" and left.transfers.tolist() == [False, False, True, False]
+    assert result.status == "solved" and left.transfers.tolist() == [False, False, True, False]
     assert [t.tolist() for t in seen[1:]] == [[False] * 4, [False, False, True, False]]
     segment = left.segments()[2]
     np.testing.assert_allclose(np.diff(left_warm[segment], 2, axis=0), 0.0, atol=1e-12)
@@ -185,3 +186,70 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     among_obstacles = replace(small_setup, environment=Colliding())
     left, _, _ = pipeline.optimize_path(among_obstacles, path, warm, np.zeros(4, np.int64), thetas)
     assert left.transfers.tolist() == [False, False, False, True]
+
+
+def test_the_numpy_cost_is_the_nlps(small_setup: Setup, setup) -> None:
+    robot, sphere, path, warm = setup
+    result = TrajectoryOptimizer(robot, joint_weights=1.0 / small_setup.limits.velocity**2).solve(path, sphere, warm)
+    assert result.success
+    np.testing.assert_allclose(knot_cost(small_setup, result.theta), result.cost, rtol=1e-12)
+    assert knot_cost(small_setup, warm) > result.cost
+
+
+def test_path_windows_cut_at_captures_and_cover_the_path(setup) -> None:
+    _, sphere, path, _ = setup
+    for size in (1, 10, 30, path.n_knots, 10 * path.n_knots):
+        windows = path.blocks(size)
+        assert windows[0][0] == 0 and windows[-1][1] == len(path.landmark_knots) - 1
+        assert all(a[1] == b[0] and a[0] < a[1] for a, b in zip(windows[:-1], windows[1:], strict=True))
+        sizes = [path.landmark_knots[last] - path.landmark_knots[first] for first, last in windows]
+        assert all(k >= size for k in sizes[:-1]) and (len(sizes) == 1 or sizes[-1] >= size / 2)
+    assert path.blocks(path.n_knots) == [(0, 4)]
+    window = path.window(1, 3)
+    knots = slice(path.landmark_knots[1], path.landmark_knots[3] + 1)
+    np.testing.assert_array_equal(window.positions, path.positions[knots])
+    np.testing.assert_array_equal(window.rotations, path.rotations[knots])
+    assert window.landmark_knots.tolist() == (path.landmark_knots[1:4] - knots.start).tolist()
+    assert [(s.stop - s.start) for s in window.segments()] == [(s.stop - s.start) for s in path.segments()[1:3]]
+
+
+def test_fixed_ends_keep_their_angles_and_the_rest_finds_the_same_optimum(setup) -> None:
+    robot, sphere, path, warm = setup
+    opt = TrajectoryOptimizer(robot)
+    free = opt.solve(path, sphere, warm)
+    start = warm.copy()
+    start[0], start[-1] = free.theta[0], free.theta[-1]  # the free optimum's ends, the rest from the IK
+    fixed = opt.solve(path, sphere, start, fixed=(True, True))
+    assert free.success and fixed.success
+    np.testing.assert_array_equal(fixed.theta[[0, -1]], free.theta[[0, -1]])
+    np.testing.assert_allclose(fixed.theta, free.theta, atol=1e-5)
+    np.testing.assert_allclose(fixed.cost, free.cost, rtol=1e-6)
+    # other ends than the optimum's: kept exactly, the knots next to them follow within a step
+    start[0] = generalized_ik(robot, sphere, path.positions[0], free.theta[0] + 0.05, restarts=False).theta
+    moved = opt.solve(path, sphere, start, fixed=(True, False))
+    assert moved.success and np.array_equal(moved.theta[0], start[0]) and moved.cost > free.cost
+    assert np.abs(moved.theta[1] - start[0]).max() <= 0.25 + 1e-7
+
+
+def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
+    small_setup: Setup, setup, monkeypatch
+) -> None:
+    import optlight.pipeline as pipeline
+
+    _, _, path, warm = setup
+    calls = []
+
+    def fails_from_a_fixed_start(setup_, path_, warm_, fixed):
+        calls.append((path_.n_knots, fixed[0]))
+        if fixed[0]:
+            raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
+        return TrajectoryNLPResult(warm_, True, "solved", 1.0, 0.0, 1, 0.0)
+
+    monkeypatch.setattr(pipeline, "optimize_knots", fails_from_a_fixed_start)
+    monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", 15)
+    assert path.blocks(15) == [(0, 2), (2, 3), (3, 4)] and path.landmark_knots.tolist() == [0, 8, 20, 35, 46]
+    # the second window fails from the first's end, and is solved with the first (free start); the
+    # third fails from the second's end, and with the second (fixed start at the first's end)
+    with pytest.raises(SolverError, match=r"between captures 3 and 4 \(visiting order\): the trajectory NLP"):
+        pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), warm[path.landmark_knots])
+    assert calls == [(21, False), (16, True), (36, False), (12, True), (27, True)]

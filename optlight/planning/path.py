@@ -65,6 +65,41 @@ class LightPath:
             raise ValueError(f"transfers has shape {mask.shape}, expected {self.transfers.shape}")
         return replace(self, transfers=mask)
 
+    def knots_between(self, first: int, last: int) -> slice:
+        """Knot slice from visited landmark ``first`` to visited landmark ``last`` (both included)."""
+        return slice(int(self.landmark_knots[first]), int(self.landmark_knots[last]) + 1)
+
+    def window(self, first: int, last: int) -> LightPath:
+        """The part of the path from visited landmark ``first`` to visited landmark ``last`` (both
+        included): its knots, segments and transfers, as a path of its own."""
+        knots = self.knots_between(first, last)
+        return replace(
+            self,
+            directions=self.directions[knots],
+            positions=self.positions[knots],
+            rotations=self.rotations[knots],
+            order=self.order[first : last + 1],
+            landmark_knots=self.landmark_knots[first : last + 1] - knots.start,
+            transfers=self.transfers[first:last],
+        )
+
+    def blocks(self, knots: int) -> list[tuple[int, int]]:
+        """The path cut at visited landmarks into windows (first, last) of about ``knots`` knots:
+        each window takes whole segments until it has at least ``knots``; the last window takes
+        what remains, or joins the one before it when that would leave it less than half as many."""
+        cuts = [0]
+        for s in range(1, len(self.landmark_knots)):
+            if self.landmark_knots[s] - self.landmark_knots[cuts[-1]] >= knots:
+                cuts.append(s)
+        last = len(self.landmark_knots) - 1
+        if cuts[-1] != last:
+            if len(cuts) > 1 and self.landmark_knots[last] - self.landmark_knots[cuts[-1]] < knots / 2:
+                cuts.pop()
+            cuts.append(last)
+        if len(cuts) == 1:  # a single landmark: no segment
+            cuts.append(last)
+        return list(zip(cuts[:-1], cuts[1:], strict=True))
+
     def arc_lengths(self) -> Array:
         """Angle (rad) travelled on the sphere along each segment."""
         out = []

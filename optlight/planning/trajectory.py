@@ -51,6 +51,10 @@ from optlight.spec import SolverSpec
 Array = NDArray[np.float64]
 
 
+#: Weight w of the posture term w Σ_k |θ_k − θ_ref|² (1/rad²): small, it only settles the null space.
+POSTURE_WEIGHT = 1e-6
+
+
 @dataclass(frozen=True)
 class TrajectoryNLPResult:
     """Knot configurations (K, n) and the solver's account of them."""
@@ -65,7 +69,8 @@ class TrajectoryNLPResult:
 
 
 class TrajectoryOptimizer:
-    """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots).
+    """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots,
+    transfer knots, fixed ends).
 
     ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
     ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1);
@@ -80,7 +85,7 @@ class TrajectoryOptimizer:
         *,
         path_mode: str = "arc",
         max_step: float = 0.25,
-        posture_weight: float = 1e-6,
+        posture_weight: float = POSTURE_WEIGHT,
         joint_weights: NDArray[np.float64] | None = None,
         clearance: ca.Function | None = None,
         view: ca.Function | None = None,
@@ -99,7 +104,7 @@ class TrajectoryOptimizer:
         self.options = ipopt_options(
             solver or SolverSpec(), ipopt__constr_viol_tol=1e-9, ipopt__hessian_approximation="exact"
         )
-        self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...]], ca.Function] = {}
+        self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], tuple[bool, bool]], ca.Function] = {}
         self._knot_fn = self._build_knot_function()
 
     def _build_knot_function(self) -> ca.Function:
@@ -122,19 +127,27 @@ class TrajectoryOptimizer:
             [ca.vertcat(h, plane, wedge, pin, outside)],
         )
 
-    def _solver(self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...]) -> ca.Function:
-        key = (n_knots, landmark_knots, off_sphere)
+    def _solver(
+        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed: tuple[bool, bool]
+    ) -> ca.Function:
+        key = (n_knots, landmark_knots, off_sphere, fixed)
         if key not in self._solvers:
             self._solvers[key] = self._build_solver(*key)
         return self._solvers[key]
 
-    def _build_solver(self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...]) -> ca.Function:
+    def _build_solver(
+        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed: tuple[bool, bool]
+    ) -> ca.Function:
         n = self.robot.n
-        theta = ca.MX.sym("theta", n, n_knots)
-        # parameters: O (3), b (1), θ_ref (n), then per knot n, u0, u1, t1, t2, a* (18 × K)
-        p = ca.MX.sym("p", 4 + n + 18 * n_knots)
+        free = _free_knots(n_knots, fixed)
+        variables = ca.MX.sym("theta", n, len(free))
+        # parameters: O (3), b (1), θ_ref (n), per knot n, u0, u1, t1, t2, a* (18 × K), then the
+        # first and the last knot's angles (2n), used where that end is fixed
+        p = ca.MX.sym("p", 4 + n + 18 * n_knots + 2 * n)
         center, radius, theta_ref = p[0:3], p[3], p[4 : 4 + n]
-        per_knot = ca.reshape(p[4 + n :], 18, n_knots)
+        per_knot = ca.reshape(p[4 + n : 4 + n + 18 * n_knots], 18, n_knots)
+        ends = ca.reshape(p[4 + n + 18 * n_knots :], n, 2)
+        theta = ca.horzcat(*([ends[:, 0]] if fixed[0] else []), variables, *([ends[:, 1]] if fixed[1] else []))
         mapped = self._knot_fn.map(n_knots)
         g_all = mapped(
             theta,
@@ -147,30 +160,33 @@ class TrajectoryOptimizer:
             per_knot[12:15, :],
             per_knot[15:18, :],
         )
-        on_sphere = [k for k in range(n_knots) if k not in set(off_sphere)]
+        # a fixed knot's rows are constants: only the free knots carry rows
+        on_sphere = [k for k in free if k not in set(off_sphere)]
+        landmarks = [k for k in landmark_knots if k in set(free)]
         h = ca.vec(g_all[0:3, on_sphere])
-        pins = ca.vec(g_all[6:8, list(landmark_knots)])
+        pins = ca.vec(g_all[6:8, landmarks])
         steps = ca.vec(theta[:, 1:] - theta[:, :-1])
         constraints = [h, pins, steps, ca.vec(g_all[8, list(off_sphere)])]
         if self.path_mode == "arc":
             interior = [k for k in on_sphere if k not in set(landmark_knots)]
             constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
         if self.clearance is not None:
-            constraints.append(ca.vec(self.clearance.map(n_knots)(theta)))
+            constraints.append(ca.vec(self.clearance.map(len(free))(variables)))
         if self.view is not None:
-            knots = list(range(n_knots)) if self.view_mode == "path" else list(landmark_knots)
+            knots = free if self.view_mode == "path" else landmarks
             constraints.append(ca.vec(self.view.map(len(knots))(theta[:, knots])))
         dtheta = theta[:, 1:] - theta[:, :-1]
         posture = theta - ca.repmat(theta_ref, 1, n_knots)
         w = ca.DM(np.sqrt(self.joint_weights))
         cost = ca.sumsqr(ca.repmat(w, 1, n_knots - 1) * dtheta) + self.posture_weight * ca.sumsqr(posture)
-        nlp = {"x": ca.vec(theta), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
+        nlp = {"x": ca.vec(variables), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
         return ca.nlpsol("trajectory_nlp", "ipopt", nlp, self.options)
 
-    def bounds(self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0) -> tuple[Array, Array]:
-        """lbg, ubg in the order the constraints are stacked in the solver."""
+    def bounds(self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0, n_fixed: int = 0) -> tuple[Array, Array]:
+        """lbg, ubg in the order the constraints are stacked in the solver (``n_fixed`` of the
+        landmark knots fixed)."""
         n = self.robot.n
-        eq = np.zeros(3 * (n_knots - n_off_sphere) + 2 * n_landmarks)
+        eq = np.zeros(3 * (n_knots - n_off_sphere - n_fixed) + 2 * (n_landmarks - n_fixed))
         step = np.full(n * (n_knots - 1), self.max_step)
         lbg, ubg = [eq, -step, np.zeros(n_off_sphere)], [eq, step, np.full(n_off_sphere, np.inf)]
         if self.path_mode == "arc":
@@ -179,19 +195,23 @@ class TrajectoryOptimizer:
             ubg += [np.zeros(n_int), np.full(2 * n_int, np.inf)]
         rows = 0
         if self.clearance is not None:
-            rows += self.clearance.size1_out(0) * n_knots
+            rows += self.clearance.size1_out(0) * (n_knots - n_fixed)
         if self.view is not None:
-            rows += self.view.size1_out(0) * (n_knots if self.view_mode == "path" else n_landmarks)
+            rows += self.view.size1_out(0) * ((n_knots if self.view_mode == "path" else n_landmarks) - n_fixed)
         lbg.append(np.zeros(rows))
         ubg.append(np.full(rows, np.inf))
         return np.concatenate(lbg), np.concatenate(ubg)
 
-    def solve(self, path: LightPath, sphere: LightSphere, theta0: Array) -> TrajectoryNLPResult:
-        """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n)."""
+    def solve(
+        self, path: LightPath, sphere: LightSphere, theta0: Array, fixed: tuple[bool, bool] = (False, False)
+    ) -> TrajectoryNLPResult:
+        """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n); where
+        ``fixed`` says so, the first or the last knot keeps its angles from ``theta0``."""
         n_knots, n = path.n_knots, self.robot.n
         landmark_knots = tuple(int(k) for k in path.landmark_knots)
         off_sphere = tuple(int(k) for k in np.flatnonzero(~path.on_sphere()))
-        solver = self._solver(n_knots, landmark_knots, off_sphere)
+        free = _free_knots(n_knots, fixed)
+        solver = self._solver(n_knots, landmark_knots, off_sphere, fixed)
         per_knot = np.zeros((n_knots, 18))
         for seg in path.segments():
             u0, u1 = path.directions[seg.start], path.directions[seg.stop - 1]
@@ -202,18 +222,22 @@ class TrajectoryOptimizer:
         for k in range(n_knots):
             per_knot[k, 9:12], per_knot[k, 12:15] = tangent_basis(path.directions[k])
         per_knot[:, 15:18] = path.positions
-        p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel()])
-        lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere))
+        theta0 = np.asarray(theta0, float)
+        p = np.concatenate(
+            [sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel(), theta0[0], theta0[-1]]
+        )
+        lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), sum(fixed))
         lower, upper = knot_bounds(self.robot)
-        lbx, ubx = np.tile(lower, n_knots), np.tile(upper, n_knots)
-        x0 = np.clip(np.asarray(theta0, float).ravel(), lbx, ubx)
+        lbx, ubx = np.tile(lower, len(free)), np.tile(upper, len(free))
+        x0 = np.clip(theta0[free].ravel(), lbx, ubx)
         start = time.perf_counter()
         out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         elapsed = time.perf_counter() - start
         stats = solver.stats()
-        theta = np.asarray(out["x"]).reshape(n_knots, n)
+        theta = theta0.copy()
+        theta[free] = np.asarray(out["x"]).reshape(len(free), n)
         g = np.asarray(out["g"]).ravel()
-        n_h = 3 * (n_knots - len(off_sphere))  # the h rows come first, on-sphere knots only
+        n_h = 3 * (len(free) - len(off_sphere))  # the h rows come first, free on-sphere knots only
         max_h = float(np.max(np.abs(g[:n_h]))) if n_h else 0.0
         if not np.all(np.isfinite(theta)):
             raise SolverError(f"trajectory NLP returned non-finite joint angles ({stats['return_status']})")
@@ -228,14 +252,32 @@ class TrajectoryOptimizer:
         )
 
 
+def knot_cost(setup: Setup, theta: Array) -> float:
+    """The cost :func:`optimize_knots` minimises, at the knots ``theta`` (K, n) (rad), in NumPy:
+    Σ_k Σ_j (θ_{k+1,j} − θ_{k,j})² / v_max,j² + :data:`POSTURE_WEIGHT` Σ_k |θ_k − θ_ref|² (s²)."""
+    steps = np.diff(theta, axis=0) / setup.limits.velocity
+    return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - setup.robot.theta_ref) ** 2))
+
+
+def _free_knots(n_knots: int, fixed: tuple[bool, bool]) -> list[int]:
+    """The knots of ``n_knots`` that are variables: all but the first and the last where ``fixed``."""
+    free = list(range(int(fixed[0]), n_knots - int(fixed[1])))
+    if not free:
+        raise ValueError(f"a path of {n_knots} knots with both ends fixed has no knot to optimise")
+    return free
+
+
 #: Clearance rows below this (m) at some knot join the trajectory NLP (:func:`optimize_knots`).
 ACTIVE_DISTANCE = 0.15
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
 
 
-def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPResult:
-    """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n).
+def optimize_knots(
+    setup: Setup, path: LightPath, warm: Array, fixed: tuple[bool, bool] = (False, False)
+) -> TrajectoryNLPResult:
+    """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
+    the first or the last knot kept at its ``warm`` angles where ``fixed`` says so.
 
     Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits); with an
     environment its view-cone rows join, and of its clearance rows those that can bind: the rows
@@ -267,7 +309,7 @@ def optimize_knots(setup: Setup, path: LightPath, warm: Array) -> TrajectoryNLPR
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
         )
-        nlp = optimizer.solve(path, setup.sphere, warm)
+        nlp = optimizer.solve(path, setup.sphere, warm, fixed)
         iterations, time_s = iterations + nlp.iterations, time_s + nlp.time_s
         if env is None or rows is None or not nlp.success:
             break
