@@ -196,7 +196,7 @@ def optimize_path(
     landmark_thetas: Array,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
-    """The trajectory NLP, window by window along the path (:meth:`LightPath.blocks`, about
+    """The trajectory NLP, window by window along the path (:meth:`LightPath.windows`, about
     :data:`NLP_WINDOW_KNOTS` knots each, cut at captures), warm-started at the per-knot IK ``warm``
     (K, n); a window starts at the posture the window before it ended at (its first knot fixed,
     :func:`optimize_window`), and where it finds no way from there, it is solved again together with
@@ -207,7 +207,7 @@ def optimize_path(
     Why windows: one NLP over all knots needs as many iterations as its hardest stretch needs, for
     every knot; on the scaling benchmark's 576 captures among 3 obstacles it did not converge in
     300 iterations (15 min). The price is that a window's end does not see the next window's path."""
-    windows = path.blocks(NLP_WINDOW_KNOTS)
+    windows = path.windows(NLP_WINDOW_KNOTS)
     theta, warm, transfers = warm.copy(), warm.copy(), path.transfers.copy()
     results: list[TrajectoryNLPResult] = []
     for done, (first, last) in enumerate(windows):
@@ -219,7 +219,7 @@ def optimize_path(
                 postures[0] = theta[knots.start]
                 initial, missed = knot_ik(setup, window, postures)
             try:
-                window, warm_window, result = optimize_window(setup, window, initial, missed, postures, (fixed, False))
+                window, warm_window, result = optimize_window(setup, window, initial, missed, postures, fixed)
                 break
             except SolverError as e:
                 error = e
@@ -240,24 +240,25 @@ def optimize_window(
     warm: Array,
     failures: NDArray[np.int64],
     landmark_thetas: Array,
-    fixed: tuple[bool, bool] = (False, False),
+    fixed_start: bool = False,
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path) over the knots of ``path``, warm-started
     at the per-knot IK ``warm`` (K, n) through the capture postures ``landmark_thetas`` (M, n), its
-    first or last knot kept at ``warm`` where ``fixed``; when it fails, the segments that IK could
-    not follow (:func:`unfollowed_segments`) become transfers: the light leaves the sphere between
-    their captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
-    straight line between the captures' postures), and the NLP runs again. Returns the path, its warm start and the NLP's result; raises :class:`SolverError` when
-    the NLP fails with no such segment, or again."""
+    first knot kept at ``warm`` with ``fixed_start``; when it fails, the segments that IK could not
+    follow (:func:`unfollowed_segments`) become transfers: the light leaves the sphere between their
+    captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
+    straight line between the captures' postures), and the NLP runs again. Returns the path, its
+    warm start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such
+    segment, or again."""
     try:
-        return path, warm, optimize_knots(setup, path, warm, fixed)
+        return path, warm, optimize_knots(setup, path, warm, fixed_start)
     except SolverError:
         unfollowed = unfollowed_segments(setup, path, warm, failures)
         if not unfollowed.any():
             raise
     path = path.with_transfers(unfollowed)
     warm, _ = knot_ik(setup, path, landmark_thetas)
-    return path, warm, optimize_knots(setup, path, warm, fixed)
+    return path, warm, optimize_knots(setup, path, warm, fixed_start)
 
 
 def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -> TrajectoryNLPResult:

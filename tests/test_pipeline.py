@@ -53,13 +53,13 @@ def test_the_nlp_in_windows_plans_what_one_nlp_plans(plan: optlight.Plan, monkey
 
     size = plan.path.n_knots // 3
     monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", size)
-    assert len(plan.path.blocks(size)) >= 2
+    assert len(plan.path.windows(size)) >= 2
     events: list[tuple[str, int, int]] = []
     windowed = optlight.solve(small_problem(), progress=lambda *e: events.append(e))
     assert windowed.verification.passed  # the captures two windows share hold the light to 1e-6 m
     np.testing.assert_array_equal(windowed.path.positions, plan.path.positions)  # the same captures and knots
     assert not windowed.path.transfers.any()
-    windows = len(windowed.path.blocks(size))
+    windows = len(windowed.path.windows(size))
     windowed_events = [("nlp", d, windows) for d in range(1, windows + 1)]
     assert [e for e in events if e[0] == "nlp"] == [("nlp", 0, 1), *windowed_events, ("nlp", 1, 1)]
     # a fixed posture where two windows meet costs little: motion within 5 % of the one NLP's (here

@@ -153,7 +153,7 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     thetas = warm[path.landmark_knots]
     seen = []
 
-    def on_the_sphere_fails(setup_, path_, warm_, fixed):
+    def on_the_sphere_fails(setup_, path_, warm_, fixed_start):
         seen.append(path_.transfers.copy())
         if not path_.transfers.any():
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
@@ -199,12 +199,12 @@ def test_the_numpy_cost_is_the_nlps(small_setup: Setup, setup) -> None:
 def test_path_windows_cut_at_captures_and_cover_the_path(setup) -> None:
     _, sphere, path, _ = setup
     for size in (1, 10, 30, path.n_knots, 10 * path.n_knots):
-        windows = path.blocks(size)
+        windows = path.windows(size)
         assert windows[0][0] == 0 and windows[-1][1] == len(path.landmark_knots) - 1
         assert all(a[1] == b[0] and a[0] < a[1] for a, b in zip(windows[:-1], windows[1:], strict=True))
         sizes = [path.landmark_knots[last] - path.landmark_knots[first] for first, last in windows]
         assert all(k >= size for k in sizes[:-1]) and (len(sizes) == 1 or sizes[-1] >= size / 2)
-    assert path.blocks(path.n_knots) == [(0, 4)]
+    assert path.windows(path.n_knots) == [(0, 4)]
     window = path.window(1, 3)
     knots = slice(path.landmark_knots[1], path.landmark_knots[3] + 1)
     np.testing.assert_array_equal(window.positions, path.positions[knots])
@@ -213,20 +213,20 @@ def test_path_windows_cut_at_captures_and_cover_the_path(setup) -> None:
     assert [(s.stop - s.start) for s in window.segments()] == [(s.stop - s.start) for s in path.segments()[1:3]]
 
 
-def test_fixed_ends_keep_their_angles_and_the_rest_finds_the_same_optimum(setup) -> None:
+def test_a_fixed_start_keeps_its_angles_and_the_rest_finds_the_same_optimum(setup) -> None:
     robot, sphere, path, warm = setup
     opt = TrajectoryOptimizer(robot)
     free = opt.solve(path, sphere, warm)
     start = warm.copy()
-    start[0], start[-1] = free.theta[0], free.theta[-1]  # the free optimum's ends, the rest from the IK
-    fixed = opt.solve(path, sphere, start, fixed=(True, True))
+    start[0] = free.theta[0]  # the free optimum's first knot, the rest from the IK
+    fixed = opt.solve(path, sphere, start, fixed_start=True)
     assert free.success and fixed.success
-    np.testing.assert_array_equal(fixed.theta[[0, -1]], free.theta[[0, -1]])
+    np.testing.assert_array_equal(fixed.theta[0], free.theta[0])
     np.testing.assert_allclose(fixed.theta, free.theta, atol=1e-5)
     np.testing.assert_allclose(fixed.cost, free.cost, rtol=1e-6)
     # other ends than the optimum's: kept exactly, the knots next to them follow within a step
     start[0] = generalized_ik(robot, sphere, path.positions[0], free.theta[0] + 0.05, restarts=False).theta
-    moved = opt.solve(path, sphere, start, fixed=(True, False))
+    moved = opt.solve(path, sphere, start, fixed_start=True)
     assert moved.success and np.array_equal(moved.theta[0], start[0]) and moved.cost > free.cost
     assert np.abs(moved.theta[1] - start[0]).max() <= 0.25 + 1e-7
 
@@ -239,15 +239,15 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     _, _, path, warm = setup
     calls = []
 
-    def fails_from_a_fixed_start(setup_, path_, warm_, fixed):
-        calls.append((path_.n_knots, fixed[0]))
-        if fixed[0]:
+    def fails_from_a_fixed_start(setup_, path_, warm_, fixed_start):
+        calls.append((path_.n_knots, fixed_start))
+        if fixed_start:
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
         return TrajectoryNLPResult(warm_, True, "solved", 1.0, 0.0, 1, 0.0)
 
     monkeypatch.setattr(pipeline, "optimize_knots", fails_from_a_fixed_start)
     monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", 15)
-    assert path.blocks(15) == [(0, 2), (2, 3), (3, 4)] and path.landmark_knots.tolist() == [0, 8, 20, 35, 46]
+    assert path.windows(15) == [(0, 2), (2, 3), (3, 4)] and path.landmark_knots.tolist() == [0, 8, 20, 35, 46]
     # the second window fails from the first's end, and is solved with the first (free start); the
     # third fails from the second's end, and with the second (fixed start at the first's end)
     with pytest.raises(SolverError, match=r"between captures 3 and 4 \(visiting order\): the trajectory NLP"):

@@ -83,7 +83,7 @@ class LightPath:
             transfers=self.transfers[first:last],
         )
 
-    def blocks(self, knots: int) -> list[tuple[int, int]]:
+    def windows(self, knots: int) -> list[tuple[int, int]]:
         """The path cut at visited landmarks into windows (first, last) of about ``knots`` knots:
         each window takes whole segments until it has at least ``knots``; the last window takes
         what remains, or joins the one before it when that would leave it less than half as many."""

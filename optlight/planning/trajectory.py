@@ -73,7 +73,7 @@ class TrajectoryNLPResult:
 
 class TrajectoryOptimizer:
     """IPOPT over all knots of a path; the solver is built once per (knot count, landmark knots,
-    transfer knots, fixed ends).
+    transfer knots, first knot fixed or not).
 
     ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
     ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1);
@@ -114,7 +114,7 @@ class TrajectoryOptimizer:
             ipopt__hessian_approximation="exact",
             ipopt__mu_init=MU_INIT,
         )
-        self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], tuple[bool, bool]], ca.Function] = {}
+        self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], bool], ca.Function] = {}
         self._knot_fn = self._build_knot_function()
 
     def _build_knot_function(self) -> ca.Function:
@@ -138,26 +138,25 @@ class TrajectoryOptimizer:
         )
 
     def _solver(
-        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed: tuple[bool, bool]
+        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed_start: bool
     ) -> ca.Function:
-        key = (n_knots, landmark_knots, off_sphere, fixed)
+        key = (n_knots, landmark_knots, off_sphere, fixed_start)
         if key not in self._solvers:
             self._solvers[key] = self._build_solver(*key)
         return self._solvers[key]
 
     def _build_solver(
-        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed: tuple[bool, bool]
+        self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed_start: bool
     ) -> ca.Function:
         n = self.robot.n
-        free = _free_knots(n_knots, fixed)
+        free = list(range(int(fixed_start), n_knots))
         variables = ca.MX.sym("theta", n, len(free))
         # parameters: O (3), b (1), θ_ref (n), per knot n, u0, u1, t1, t2, a* (18 × K), then the
-        # first and the last knot's angles (2n), used where that end is fixed
-        p = ca.MX.sym("p", 4 + n + 18 * n_knots + 2 * n)
+        # first knot's angles (n), used when it is fixed
+        p = ca.MX.sym("p", 4 + n + 18 * n_knots + n)
         center, radius, theta_ref = p[0:3], p[3], p[4 : 4 + n]
         per_knot = ca.reshape(p[4 + n : 4 + n + 18 * n_knots], 18, n_knots)
-        ends = ca.reshape(p[4 + n + 18 * n_knots :], n, 2)
-        theta = ca.horzcat(*([ends[:, 0]] if fixed[0] else []), variables, *([ends[:, 1]] if fixed[1] else []))
+        theta = ca.horzcat(p[4 + n + 18 * n_knots :], variables) if fixed_start else variables
         mapped = self._knot_fn.map(n_knots)
         g_all = mapped(
             theta,
@@ -213,15 +212,17 @@ class TrajectoryOptimizer:
         return np.concatenate(lbg), np.concatenate(ubg)
 
     def solve(
-        self, path: LightPath, sphere: LightSphere, theta0: Array, fixed: tuple[bool, bool] = (False, False)
+        self, path: LightPath, sphere: LightSphere, theta0: Array, fixed_start: bool = False
     ) -> TrajectoryNLPResult:
-        """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n); where
-        ``fixed`` says so, the first or the last knot keeps its angles from ``theta0``."""
+        """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n); with
+        ``fixed_start``, the first knot keeps its angles from ``theta0``."""
         n_knots, n = path.n_knots, self.robot.n
+        if n_knots < 2 and fixed_start:
+            raise ValueError("a path of one knot with that knot fixed has nothing to optimise")
         landmark_knots = tuple(int(k) for k in path.landmark_knots)
         off_sphere = tuple(int(k) for k in np.flatnonzero(~path.on_sphere()))
-        free = _free_knots(n_knots, fixed)
-        solver = self._solver(n_knots, landmark_knots, off_sphere, fixed)
+        free = list(range(int(fixed_start), n_knots))
+        solver = self._solver(n_knots, landmark_knots, off_sphere, fixed_start)
         per_knot = np.zeros((n_knots, 18))
         for seg in path.segments():
             u0, u1 = path.directions[seg.start], path.directions[seg.stop - 1]
@@ -233,10 +234,8 @@ class TrajectoryOptimizer:
             per_knot[k, 9:12], per_knot[k, 12:15] = tangent_basis(path.directions[k])
         per_knot[:, 15:18] = path.positions
         theta0 = np.asarray(theta0, float)
-        p = np.concatenate(
-            [sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel(), theta0[0], theta0[-1]]
-        )
-        lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), sum(fixed))
+        p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel(), theta0[0]])
+        lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), int(fixed_start))
         lower, upper = knot_bounds(self.robot)
         lbx, ubx = np.tile(lower, len(free)), np.tile(upper, len(free))
         x0 = np.clip(theta0[free].ravel(), lbx, ubx)
@@ -269,25 +268,15 @@ def knot_cost(setup: Setup, theta: Array) -> float:
     return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - setup.robot.theta_ref) ** 2))
 
 
-def _free_knots(n_knots: int, fixed: tuple[bool, bool]) -> list[int]:
-    """The knots of ``n_knots`` that are variables: all but the first and the last where ``fixed``."""
-    free = list(range(int(fixed[0]), n_knots - int(fixed[1])))
-    if not free:
-        raise ValueError(f"a path of {n_knots} knots with both ends fixed has no knot to optimise")
-    return free
-
-
 #: Clearance rows below this (m) at some knot join the trajectory NLP (:func:`optimize_knots`).
 ACTIVE_DISTANCE = 0.15
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
 
 
-def optimize_knots(
-    setup: Setup, path: LightPath, warm: Array, fixed: tuple[bool, bool] = (False, False)
-) -> TrajectoryNLPResult:
+def optimize_knots(setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False) -> TrajectoryNLPResult:
     """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
-    the first or the last knot kept at its ``warm`` angles where ``fixed`` says so.
+    the first knot kept at its ``warm`` angles with ``fixed_start``.
 
     Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits); with an
     environment its view-cone rows join, and of its clearance rows those that can bind: the rows
@@ -319,7 +308,7 @@ def optimize_knots(
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
         )
-        nlp = optimizer.solve(path, setup.sphere, warm, fixed)
+        nlp = optimizer.solve(path, setup.sphere, warm, fixed_start)
         iterations, time_s = iterations + nlp.iterations, time_s + nlp.time_s
         if env is None or rows is None or not nlp.success:
             break
