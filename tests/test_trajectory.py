@@ -253,3 +253,23 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     with pytest.raises(SolverError, match=r"between captures 3 and 4 \(visiting order\): the trajectory NLP"):
         pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), warm[path.landmark_knots])
     assert calls == [(21, False), (16, True), (36, False), (12, True), (27, True)]
+
+
+def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, setup, monkeypatch) -> None:
+    from optlight.planning import trajectory
+
+    _, _, path, warm = setup
+    real = trajectory.TrajectoryOptimizer.solve
+    barriers = []
+
+    def fails_from_the_default_barrier(self, path_, sphere, theta0, fixed_start=False):
+        barriers.append(self.options.get("ipopt.mu_init"))
+        result = real(self, path_, sphere, theta0, fixed_start)
+        return result if barriers[-1] is not None else replace(result, success=False, status="Infeasible_Problem_Detected")
+
+    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails_from_the_default_barrier)
+    free = replace(small_setup, environment=None)  # the fixture's path ignores the view: no environment
+    result = trajectory.optimize_knots(free, path, warm)
+    assert barriers == [None, trajectory.WARM_MU_INIT] and result.success
+    alone = real(trajectory.TrajectoryOptimizer(free.robot, joint_weights=1.0 / free.limits.velocity**2, mu_init=1e-4), path, free.sphere, warm)
+    assert result.iterations > alone.iterations  # both tries counted
