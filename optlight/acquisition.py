@@ -17,8 +17,8 @@ dataset folder.
    and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
    through the same :func:`optlight.solve`;
 5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
-   least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails (the planner's
-   error is the status; the first plan's error is raised). The best plan by measured cost, by the
+   least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails to solve or
+   fails verification (the reason is the status; the first plan's is raised). The best plan by measured cost, by the
    same rule (a later round replaces it only at least ``tolerance`` below), is the result; the first
    plan is the open loop's.
 
@@ -344,8 +344,9 @@ def acquire(
     """Run the camera in the loop on ``problem`` (module docstring) with ``camera`` (a
     :class:`~optlight.capture.CaptureCamera` or one of :data:`CAMERAS`; ``images`` for "folder").
 
-    Raises :class:`VerificationError` for a plan that fails verification (the robot never runs it),
-    and what :func:`optlight.solve` and the cameras raise."""
+    Raises :class:`VerificationError` when the first plan fails verification (the robot never runs
+    it; a re-plan that fails ends the loop, like one that fails to solve, and the best plan so far
+    stands), and what :func:`optlight.solve` and the cameras raise."""
     notify: LoopProgress = progress or (lambda it, stage, done, total: None)
     setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
     device = make_camera(camera, setup, images) if isinstance(camera, str) else camera
@@ -364,10 +365,15 @@ def acquire(
             status = f"re-plan failed ({e})"
             break
         if not plan.verification.passed:
-            raise VerificationError(
-                f"iteration {i}: the plan failed verification; the robot does not run it\n{plan.verification.summary()}",
-                plan.verification,
-            )
+            if i == 0:
+                raise VerificationError(
+                    f"iteration {i}: the plan failed verification; the robot does not run it\n"
+                    f"{plan.verification.summary()}",
+                    plan.verification,
+                )
+            failed = ", ".join(name for name, check in plan.verification.checks.items() if not check.passed)
+            status = f"re-plan failed verification ({failed}); the robot does not run it"
+            break
         notify(i, "capture", 0, len(plan.visited))
         try:
             captures = execute(plan, device)

@@ -63,6 +63,31 @@ def test_the_loop_reduces_a_mismatched_measured_cost(mismatched: Acquisition) ->
     assert mismatched.status in ("stopped improving", "iteration limit")
 
 
+def test_a_replan_that_fails_verification_ends_the_loop_and_the_best_plan_stands(monkeypatch) -> None:
+    import optlight.acquisition as acquisition_module
+
+    real = acquisition_module.solve
+    plans = []
+
+    def second_plan_fails(*args, **kwargs):
+        plan = real(*args, **kwargs)
+        if plans:  # the re-plan: its light leaves the landmark by 1 mm at one capture
+            checks = dict(plan.verification.checks)
+            checks["landmark"] = dataclasses.replace(checks["landmark"], max_value=1e-3, failing_samples=1, episodes=1)
+            plan = dataclasses.replace(plan, verification=dataclasses.replace(plan.verification, checks=checks))
+            assert not plan.verification.passed
+        plans.append(plan)
+        return plan
+
+    monkeypatch.setattr(acquisition_module, "solve", second_plan_fails)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = acquire(tiny(**MISMATCH), "model")
+    assert len(plans) == 2 and len(result.iterations) == 1  # the re-plan was never run
+    assert result.best is result.open_loop and result.best.plan is plans[0]
+    assert result.status == "re-plan failed verification (landmark); the robot does not run it"
+
+
 def test_captures_are_where_forward_kinematics_puts_the_light(mismatched: Acquisition) -> None:
     """The simulated robot: the light at each trigger is the trajectory's forward kinematics, on the
     sphere at the planned landmark (h residual of the verified plan)."""
