@@ -62,11 +62,11 @@ def test_the_nlp_in_windows_plans_what_one_nlp_plans(plan: optlight.Plan, monkey
     windows = len(windowed.path.windows(size))
     windowed_events = [("nlp", d, windows) for d in range(1, windows + 1)]
     assert [e for e in events if e[0] == "nlp"] == [("nlp", 0, 1), *windowed_events, ("nlp", 1, 1)]
-    # a fixed posture where two windows meet costs little: motion within 5 % of the one NLP's (here
-    # windows of a third of the path; the NLP's cost, the squared joint steps at the velocity limits,
-    # within 20 %, measured 14 % higher)
+    # a window's end fixed for the next costs little: motion and the NLP's cost (the squared joint
+    # steps at the velocity limits, over all knots) within 5 % of the one NLP's (windows of a third
+    # of the path here; measured equal to 1e-7)
     assert windowed.trajectory.duration <= 1.05 * plan.trajectory.duration
-    assert plan.nlp.cost <= windowed.nlp.cost <= 1.2 * plan.nlp.cost
+    assert windowed.nlp.cost <= 1.05 * plan.nlp.cost
 
 
 def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> None:
