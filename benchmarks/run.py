@@ -523,12 +523,32 @@ def batch_rows(name: str, result: Result) -> list[Row]:
     return rows
 
 
+def lightset_plan_rows(name: str, result: Result) -> list[Row]:
+    """``bench_lightset_plans``: every distribution (:func:`distribution_rows`); where the set was
+    also designed on the cap alone, its rows carry that design's median as the baseline (same run)."""
+    rows: list[Row] = []
+    for problem, figures in result.items():
+        if problem == "meta":
+            continue
+        cap = figures.get("designed_on_cap", {})
+        shipped = {k: v for k, v in figures.items() if k != "designed_on_cap"}
+        for row in distribution_rows(name, {problem: shipped}):
+            key = row.metric.removeprefix(f"{problem}/").split(" [")[0].split("/")
+            node: Any = cap
+            for part in key:
+                node = node.get(part, {}) if isinstance(node, dict) else {}
+            baseline = node.get("median") if isinstance(node, dict) else None
+            rows.append(dataclasses.replace(row, baseline_median=baseline))
+    return rows
+
+
 #: Components whose results need their own reading (a baseline to pair); the rest are read generically.
 COMPONENT_ROWS: dict[str, RowsFn] = {
     "batch": batch_rows,
     "environment": environment_rows,
     "ik": ik_rows,
     "landmarks": landmark_rows,
+    "lightset_plans": lightset_plan_rows,
     "scaling": scaling_rows,
 }
 

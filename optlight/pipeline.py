@@ -90,11 +90,12 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
 
     start = time.perf_counter()
-    landmarks, design, captures, merged = choose_captures(setup, lambda d, t: notify("landmarks", d, t))
+    reacher = Reacher(setup)
+    landmarks, design, captures, merged = choose_captures(setup, lambda d, t: notify("landmarks", d, t), reacher)
     timings["landmarks"] = time.perf_counter() - start
 
     with stage("placement"):
-        placement = place_captures(setup, captures, design)
+        placement = place_captures(setup, captures, design, reacher)
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
@@ -141,29 +142,34 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         timings=timings,
         warnings=tuple(notes),
         lightset=lightset,
+        reach=design.reach if design is not None else None,
     )
 
 
 def choose_captures(
-    setup: Setup, progress: Callable[[int, int], None] | None = None
+    setup: Setup, progress: Callable[[int, int], None] | None = None, reacher: Reacher | None = None
 ) -> tuple[LandmarkSet, SetDesign | None, list[Landmark], list[str]]:
     """Where the light should go: the ``[lightset]``'s lights designed together (then the design too),
     or the per-azimuth landmark search on the view-clear lights; then the distinct captures (landmarks
-    closer than ``[landmarks] distinct_deg`` are one) and a note per merge."""
+    closer than ``[landmarks] distinct_deg`` are one) and a note per merge. ``reacher``: the setup's,
+    when one is built (a set designed over the reachable lights maps them with it)."""
     design = None
     if setup.problem.lightset.kind != "none":
-        landmarks, design = landmarks_of_set(setup)
+        landmarks, design = landmarks_of_set(setup, reacher, progress)
     else:
         landmarks = find_landmarks(setup, progress=progress)
     captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
     return landmarks, design, captures, merged
 
 
-def place_captures(setup: Setup, captures: Sequence[Landmark], design: SetDesign | None) -> LandmarkPlacement:
+def place_captures(
+    setup: Setup, captures: Sequence[Landmark], design: SetDesign | None, reacher: Reacher | None = None
+) -> LandmarkPlacement:
     """Joint angles at the captures (:func:`~optlight.planning.policy.place_landmarks`); a light set
     replaces a light the robot cannot reach clear by the one that best keeps the set
-    (:class:`~optlight.planning.set_landmarks.SetReplacement`)."""
-    reacher = Reacher(setup)
+    (:class:`~optlight.planning.set_landmarks.SetReplacement`). ``reacher``: the setup's, when one
+    is built."""
+    reacher = reacher or Reacher(setup)
     replacement = SetReplacement(setup, design, captures, reacher) if design is not None else None
     return place_landmarks(setup, captures, reacher, replacement=replacement)
 

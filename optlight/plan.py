@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
+from optlight.planning.reach import ReachabilityMap
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.report import save_results
@@ -43,7 +44,8 @@ class Plan:
     knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
-    None without ``[lightset]``.
+    None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
+    for other plans).
     """
 
     setup: Setup
@@ -58,6 +60,7 @@ class Plan:
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
     lightset: dict[str, Any] | None = None
+    reach: ReachabilityMap | None = None
 
     @property
     def problem(self) -> Problem:
@@ -139,7 +142,9 @@ class Plan:
         if self.lightset is not None:
             capture = self.model_capture()
             summary["lightset"] = {**self.lightset, "recovery": capture.stats}
-            figures = capture.figures
+            figures = dict(capture.figures)
+            if self.reach is not None:
+                figures["lightset_reach"] = self.reach.figure(lights=self.light_directions_sphere)
             writers = [files_writer(capture.files, PHOTOMETRIC_STEREO_FOLDER)]
         return save_results(
             folder,
@@ -165,10 +170,14 @@ class Plan:
         """The visited lights captured by the model camera, normals recovered, in the DiLiGenT
         layout (:func:`optlight.datasets.model_capture`; ``[lightset]`` dark and saturation levels)."""
         spec = self.problem.lightset
+        return model_capture(self.scene, self.light_directions_sphere, spec.dark_level, spec.saturation_level)
+
+    @property
+    def light_directions_sphere(self) -> Array:
+        """Unit directions (M, 3) from O to the visited lights, sphere frame."""
         sphere = self.setup.sphere
         d = (np.array([lm.position for lm in self.visited]) - sphere.center) @ sphere.rotation
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        return model_capture(self.scene, d, spec.dark_level, spec.saturation_level)
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def joint_path_length(theta: Array) -> float:

@@ -189,6 +189,12 @@ def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
         f"| moved by the placement | {len(lightset['moved_by_placement'])} |",
         f"| dropped | {len(lightset['dropped'])} |",
     ]
+    if "designed_over" in lightset:
+        over = lightset["designed_over"]
+        lines.append(
+            f"| designed over | the lights the robot reaches clear: {over['clear_pct']:.0f} % of the cap's "
+            f"{over['map_cells']} reachability-map cells (map {over['map_time_s']:.1f} s; `lightset_reach.png`) |"
+        )
     if "grid" in lightset:
         grid = lightset["grid"]
         lines.append(

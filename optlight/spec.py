@@ -515,6 +515,18 @@ class LightSetSpec:
     grid_outside_cap: Literal["replace", "error"] = key(
         "replace", "grid directions off the cap: replace by the nearest allowed light, or refuse the file"
     )
+    design_over: Literal["reachable", "cap"] = key(
+        "reachable",
+        "design photometric_stereo and rti sets over the lights the robot reaches clear (a reachability "
+        "map of the cap first), or over the whole allowed cap (lights the robot cannot reach are replaced)",
+    )
+    reach_step_deg: float = key(
+        5.0,
+        "zenith step of that reachability map (its azimuth step is twice this)",
+        unit="deg",
+        lo=1.0,
+        hi=30.0,
+    )
     candidate_spacing_deg: float = key(
         2.0,
         "spacing of the candidate lights a grid direction may be replaced by",

@@ -172,6 +172,27 @@ def test_environment_rows(runner: ModuleType) -> None:
     assert (theirs.median, theirs.success_pct, theirs.ratio) == (-10.0, 0.0, None)
 
 
+def test_lightset_plan_rows_pair_the_cap_design(runner: ModuleType) -> None:
+    def dist(x: float) -> dict:
+        return {"median": x, "p98": x}
+
+    result = {
+        "rti": {
+            "achieved_pct": dist(100.0),
+            "solve_s": dist(10.0),
+            "joint_travel_rad": {"tour": dist(20.0)},
+            "designed_on_cap": {"achieved_pct": dist(80.0), "solve_s": dist(20.0), "joint_travel_rad": {"tour": dist(40.0)}},
+        },
+        "grid": {"achieved_pct": dist(100.0)},
+        "meta": {"lightbot_s_per_pose": 6.3},
+    }
+    rows = {(r.metric): r for r in runner.lightset_plan_rows("lightset_plans", result)}
+    assert set(rows) == {"rti/achieved_pct", "rti/solve_s [s]", "rti/joint_travel_rad/tour", "grid/achieved_pct"}
+    assert rows["rti/achieved_pct"].ratio == 1.25 and rows["rti/solve_s [s]"].baseline_median == 20.0
+    assert rows["rti/joint_travel_rad/tour"].ratio == 0.5
+    assert rows["grid/achieved_pct"].baseline_median is None
+
+
 def test_json_safe(runner: ModuleType) -> None:
     import numpy as np
 

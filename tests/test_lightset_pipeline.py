@@ -13,10 +13,11 @@ from conftest import reduced_problem
 import optlight
 from optlight.datasets import read_diligent
 from optlight.photometric_stereo import gbuffer_normal_map
-from optlight.pipeline import choose_captures
+from optlight.pipeline import choose_captures, place_captures
 from optlight.plan import PHOTOMETRIC_STEREO_FOLDER, Plan
 from optlight.planning.policy import Reacher
-from optlight.planning.set_landmarks import SetReplacement
+from optlight.planning.reach import ClearField
+from optlight.planning.set_landmarks import CLEAR_MARGIN, SetReplacement, directions_of
 from optlight.setup import Setup
 
 
@@ -118,7 +119,7 @@ def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: 
     replacement (a lower set cost with the other lights fixed; for a grid, nearer the requested
     direction) is one the robot does not reach clear, and the replacement's joint angles put the
     light there (pinocchio) with every environment row clear."""
-    sections: dict = {"count": 8, "starts": 1}
+    sections: dict = {"count": 8, "starts": 1, "design_over": "cap"}  # the rule alone, without the map
     if kind == "grid":
         sections = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8}
     setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32, lightset=sections))
@@ -158,3 +159,32 @@ def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: 
         )
         if not direct:
             assert reacher.attempt(position, start).theta is None, "a better light was passed over"
+
+
+def test_a_set_designed_over_the_reachable_lights_is_placed_where_it_was_designed() -> None:
+    """rti_dome, 8 lights. Designed on the cap alone, the placement has to replace 3 of them (the arm
+    reaches them only across the camera's view cone). Designed over the reachability map, every light
+    lies on the clear side of the map's field, and the placement puts every one where the design did:
+    its joint angles hold the light there (pinocchio, to the IK's tolerance) with every environment
+    row clear."""
+    placed = {}
+    for over in ("cap", "reachable"):
+        setup = Setup.from_problem(
+            reduced_problem("rti_dome", camera_px=32, lightset={"count": 8, "starts": 1, "design_over": over})
+        )
+        _, design, captures, _ = choose_captures(setup)
+        assert design is not None and (design.reach is not None) == (over == "reachable")
+        placement = place_captures(setup, captures, design)
+        achieved = directions_of(setup, placement.landmarks)
+        requested = design.requested[[lm.index for lm in placement.landmarks]]
+        placed[over] = (len(placement.landmarks), int(np.sum(np.sum(achieved * requested, axis=1) < 1 - 1e-12)))
+    assert placed["cap"][1] >= 2  # replaced
+    assert placed["reachable"] == (8, 0)
+    assert design.reach is not None
+    assert np.all(ClearField.from_map(design.reach).numpy(design.requested) >= CLEAR_MARGIN - 1e-6)
+    env = setup.environment
+    assert env is not None
+    ik_tol = math.sqrt(setup.problem.solver.ik_tol)  # the IK converges at |e|² < ik_tol
+    for lm, theta in zip(placement.landmarks, placement.thetas, strict=True):
+        assert np.linalg.norm(setup.robot.light_pose(theta)[0] - lm.position) <= ik_tol
+        assert env.worst_sphere_row(setup.robot, theta)[0] >= 0.0

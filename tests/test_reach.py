@@ -6,13 +6,15 @@ import dataclasses
 import json
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 from conftest import REACH_ONLY, reduced_problem
 
-from optlight.geometry import LightSphere
+from optlight.geometry import LightSphere, direction_in_sphere_frame
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
-from optlight.planning.reach import reachability_map
+from optlight.planning.policy import Reacher
+from optlight.planning.reach import ClearField, ReachabilityMap, reachability_map
 from optlight.robot import load_robot
 from optlight.setup import Setup
 from optlight.spec import load_problem, problem_from_dict
@@ -100,3 +102,74 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
     assert data["environment"] is True and data["taken_fraction"] == reach.taken_fraction
     i, j = np.argwhere(reach.taken)[0]
     assert data["status"][i][j] == "taken" and data["success"][i][j] is True and data["clearance_m"][i][j] < 0
+
+
+def test_no_blocked_cell_is_clear_from_a_clear_neighbours_posture() -> None:
+    """rti_dome: the panda crosses the camera's view cone on part of the cap, and which posture a cell
+    is started from decides whether the arm is clear there. At the map's end no blocked cell (taken
+    or unreached) is reached clear from the posture of a clear neighbour (the grow pass's fixed
+    point; the azimuth-chained pass alone leaves such cells), and every clear cell's posture holds the
+    light at the cell (pinocchio) clear of every environment row."""
+    setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32))
+    robot, env, sphere = setup.robot, setup.environment, setup.sphere
+    assert env is not None
+    reach = reachability_map(setup, zenith_step_deg=6.0, azimuth_step_deg=20.0)
+    assert reach.taken.any() and reach.clear_fraction > 0.5
+    reacher = Reacher(setup)
+    n_z, n_a = reach.taken.shape
+    for i, j in np.argwhere(~reach.clear):
+        target = sphere.position(reach.zenith[i], reach.azimuth[j])
+        for ni, nj in ((i, (j - 1) % n_a), (i, (j + 1) % n_a), (i - 1, j), (i + 1, j)):
+            if 0 <= ni < n_z and reach.clear[ni, nj]:
+                assert reacher.attempt(target, reach.theta[ni, nj]).theta is None, (i, j, ni, nj)
+    for i, j in np.argwhere(reach.clear):
+        light = robot.light_pose(reach.theta[i, j])[0]
+        target = sphere.position(reach.zenith[i], reach.azimuth[j])
+        assert np.linalg.norm(light - target) <= max(reach.residual[i, j], POSE_TOL) + 1e-12
+        assert env.worst_sphere_row(robot, reach.theta[i, j])[0] >= -CLEARANCE_TOL
+
+
+def _half_clear_map() -> ReachabilityMap:
+    """A synthetic map of 4 zenith rings × 36 azimuths, clear for azimuths 0–170°, taken for 180–350°."""
+    zenith, azimuth = np.deg2rad([20.0, 25.0, 30.0, 35.0]), np.deg2rad(np.arange(36) * 10.0)
+    shape = (len(zenith), len(azimuth))
+    taken = np.zeros(shape, bool)
+    taken[:, 18:] = True
+    nan = np.full(shape, np.nan)
+    return ReachabilityMap(
+        "synthetic", zenith, azimuth, np.ones(shape, bool), nan, np.full((*shape, 7), np.nan), nan, 0.0,
+        environment=True, taken=taken, clearance=nan,
+    )
+
+
+def test_clear_field_casadi_form_and_gradient() -> None:
+    """The CasADi form equals the NumPy form, and its gradient the NumPy form's central differences."""
+    field = ClearField.from_map(_half_clear_map())
+    rng = np.random.default_rng(3)
+    d = direction_in_sphere_frame(rng.uniform(0.3, 0.6, 6), rng.uniform(0.0, 2 * np.pi, 6))
+    x = ca.MX.sym("d", 6, 3)
+    f = ca.Function("f", [x], [field.casadi(x)])
+    g = ca.Function("g", [x], [ca.jacobian(ca.sum1(field.casadi(x)), x)])
+    np.testing.assert_allclose(np.ravel(f(d)), field.numpy(d), rtol=0, atol=1e-12)
+    grad = np.reshape(np.asarray(g(d)), (3, 6)).T  # CasADi vectorises column-major
+    h = 1e-6
+    numeric = np.zeros_like(d)
+    for k in range(6):
+        for c in range(3):
+            e = np.zeros_like(d)
+            e[k, c] = h
+            numeric[k, c] = (field.numpy(d[k] + e[k]) - field.numpy(d[k] - e[k])) / (2 * h)
+    np.testing.assert_allclose(grad, numeric, rtol=1e-5, atol=1e-6)
+
+
+def test_clear_field_sign_follows_the_map() -> None:
+    """Positive at clear cells, negative at taken ones; zero on the plane through azimuths 175° and
+    355°, which the reflection φ → 350° − φ maps onto itself while it swaps the clear and the taken
+    cells (the field is odd under it)."""
+    reach = _half_clear_map()
+    field = ClearField.from_map(reach)
+    zenith, azimuth = np.meshgrid(reach.zenith, reach.azimuth, indexing="ij")
+    values = field.numpy(direction_in_sphere_frame(zenith, azimuth))
+    assert np.all(values[reach.clear] > 0.5) and np.all(values[reach.taken] < -0.5)
+    on_plane = direction_in_sphere_frame(np.deg2rad([18.0, 27.0, 37.0]), np.deg2rad([175.0, 355.0, 175.0]))
+    np.testing.assert_allclose(field.numpy(on_plane), 0.0, atol=1e-12)

@@ -13,10 +13,14 @@ capture): every row must be ≥ 0. The IK does not see the environment, and a re
 joint angles for the same light, so where the IK's configuration breaks a row a small NLP looks for
 clear ones near it (:class:`optlight.planning.placement.ClearPosture`: min |θ − θ_IK|² with the light
 pinned at the cell, h(θ) = 0, c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK
-start), the placement policy's :class:`~optlight.planning.policy.Reacher`. A cell where neither
-finds any is *taken by the environment*: the robot reaches the light there only by colliding or
-blocking the camera (as far as these local solves can tell). The map then has three kinds of cells:
-reachable (clear), taken by the environment, unreachable.
+start), the placement policy's :class:`~optlight.planning.policy.Reacher`. The chain gives each
+cell one start, and the posture it carries may be on an IK branch that blocks the camera where
+another branch is clear; so a cell left blocked is tried again from the posture of each clear
+neighbour, until no more cells become clear. A cell where none of these finds clear joint angles is
+*taken by the environment*: the robot reaches the light there only by colliding or blocking the
+camera (as far as these local solves can tell). The map then has three kinds of cells: reachable
+(clear), taken by the environment, unreachable. :class:`ClearField` smooths the clear cells into a
+function a light set's NLP keeps its lights on.
 
 The polar plot is the cap as seen from the camera: azimuth 0 along x_S (image right), 90° along y_S
 (image up), radius = zenith.
@@ -26,14 +30,18 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import casadi as ca
 import numpy as np
 from matplotlib.figure import Figure
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
+from optlight.geometry import direction_in_sphere_frame
+from optlight.planning.lightsets import angles_of
 from optlight.planning.policy import Reacher
 from optlight.robot import KinematicState, manipulability
 from optlight.setup import Setup
@@ -137,9 +145,10 @@ class ReachabilityMap:
             "time_s": self.time_s,
         }
 
-    def figure(self) -> Figure:
+    def figure(self, lights: ArrayLike | None = None) -> Figure:
         """Polar plot: manipulability per clear cell (colour), cells taken by the environment in
-        grey with orange dots, unreachable cells as red crosses."""
+        grey with orange dots, unreachable cells as red crosses; ``lights`` (N, 3) unit directions
+        (sphere frame) as white stars when given (a light set designed over the map)."""
         fig = Figure(figsize=(6.0, 5.2), layout="constrained")
         ax = fig.add_subplot(projection="polar")
         z_deg = np.rad2deg(self.zenith)
@@ -173,7 +182,10 @@ class ReachabilityMap:
         zi, ai = np.nonzero(~self.success)
         if len(zi):
             ax.plot(self.azimuth[ai], z_deg[zi], "x", color="red", ms=6, label="unreachable")
-        if taken.any() or len(zi):
+        if lights is not None:
+            zenith, azimuth = angles_of(lights)
+            ax.plot(azimuth, np.rad2deg(zenith), "*", color="white", mec="black", ms=11, label="lights")
+        if taken.any() or len(zi) or lights is not None:
             ax.legend(loc="lower left", bbox_to_anchor=(-0.15, -0.12))
         ax.set_ylim(0.0, r_edges[-1])  # radial limits
         title = f"{self.robot}: light cap reachable in {100 * self.reachable_fraction:.1f} % of cells"
@@ -192,16 +204,66 @@ class ReachabilityMap:
         return png, js
 
 
-def reachability_map(setup: Setup, zenith_step_deg: float = 5.0, azimuth_step_deg: float = 10.0) -> ReachabilityMap:
+@dataclass(frozen=True)
+class ClearField:
+    """A smooth indicator of where on the cap the robot reaches the light clear, from a map's cells.
+
+    f(d) = Σ_k s_k w_k(d) / Σ_k w_k(d),  w_k(d) = exp(κ (d·c_k − 1)) ≈ exp(−γ_k² / (2σ²)),
+
+    with ``centers`` c_k (M, 3) the cells' unit directions (sphere frame), ``signs`` s_k = +1 for a
+    clear cell and −1 for one taken by the environment or unreachable, γ_k the angle from d to c_k
+    and κ = 1/σ² (``kappa``, rad⁻²): a Gaussian-weighted vote of the nearby cells, in [−1, 1],
+    positive where clear cells are nearer, 0 half-way between a clear and a blocked cell. f has a
+    NumPy and a CasADi form (the light-set NLP's ``allowed`` rows).
+    """
+
+    centers: Array
+    signs: Array
+    kappa: float
+
+    @classmethod
+    def from_map(cls, reach: ReachabilityMap, width: float | None = None) -> ClearField:
+        """The field of ``reach``'s cells; ``width`` σ (rad) defaults to half the map's zenith step,
+        so that each point is decided by its nearest cells."""
+        zenith, azimuth = np.meshgrid(reach.zenith, reach.azimuth, indexing="ij")
+        if width is None:
+            width = 0.5 * float(np.diff(reach.zenith).min()) if len(reach.zenith) > 1 else 0.05
+        return cls(
+            direction_in_sphere_frame(zenith, azimuth).reshape(-1, 3),
+            np.where(reach.clear, 1.0, -1.0).ravel(),
+            1.0 / width**2,
+        )
+
+    def numpy(self, directions: ArrayLike) -> Array:
+        """f at unit directions (..., 3), sphere frame."""
+        w = np.exp(self.kappa * (np.asarray(directions, float) @ self.centers.T - 1.0))
+        return (w @ self.signs) / w.sum(axis=-1)
+
+    def casadi(self, directions: ca.MX) -> ca.MX:
+        """f at the rows of the N×3 MX ``directions`` (N×1)."""
+        w = ca.exp(self.kappa * (ca.mtimes(directions, ca.DM(self.centers.T)) - 1.0))
+        return ca.mtimes(w, ca.DM(self.signs)) / ca.sum2(w)
+
+
+def reachability_map(
+    setup: Setup,
+    zenith_step_deg: float = 5.0,
+    azimuth_step_deg: float = 10.0,
+    *,
+    reacher: Reacher | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> ReachabilityMap:
     """IK success and manipulability over the setup's light cap, and with its environment the cells
     the environment takes away (see the module docstring).
 
     Zenith from the sphere's ``zenith_min`` to ``zenith_max`` (both included) in steps of at most
     ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``. Each
-    cell is one :meth:`Reacher.attempt` (IK, then a clear posture), started from a reached neighbour.
+    cell is one :meth:`Reacher.attempt` (IK, then a clear posture), started from a reached neighbour;
+    then a cell left blocked is tried again from each clear neighbour's angles, until no more become
+    clear. ``reacher``: the setup's, when one is built; ``progress(done, total)`` per cell.
     """
     robot, sphere = setup.robot, setup.sphere
-    reacher = Reacher(setup)
+    reacher = reacher or Reacher(setup)
     zmin, zmax = np.rad2deg(sphere.zenith_min), np.rad2deg(sphere.zenith_max)
     n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
     n_a = int(np.ceil(360.0 / azimuth_step_deg - 1e-9))
@@ -215,24 +277,51 @@ def reachability_map(setup: Setup, zenith_step_deg: float = 5.0, azimuth_step_de
     taken = np.zeros((n_z, n_a), bool)
     clearance = np.full((n_z, n_a), np.nan)
     t0 = time.perf_counter()
-    for i, zen in enumerate(zenith):
-        for j, azi in enumerate(azimuth):
+
+    def record(i: int, j: int, start: Array) -> None:
+        """Try cell (i, j) from ``start``; keep the attempt unless the cell already has a better one
+        (clear before taken before unreached; the smaller residual among unreached)."""
+        attempt = reacher.attempt(sphere.position(zenith[i], azimuth[j]), start)
+        if not attempt.ik.success:
+            if not success[i, j]:
+                residual[i, j] = np.fmin(residual[i, j], attempt.ik.residual)
+            return
+        if success[i, j] and (attempt.theta is None or not taken[i, j]):
+            return
+        residual[i, j] = attempt.ik.residual
+        success[i, j] = True
+        theta[i, j] = attempt.ik.theta if attempt.theta is None else attempt.theta
+        if setup.environment is not None:
+            clearance[i, j] = attempt.clearance
+            taken[i, j] = attempt.theta is None
+        manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
+
+    for i in range(n_z):
+        for j in range(n_a):
             if j > 0 and success[i, j - 1]:
-                start = theta[i, j - 1]
+                record(i, j, theta[i, j - 1])
             elif i > 0 and success[i - 1, j]:
-                start = theta[i - 1, j]
+                record(i, j, theta[i - 1, j])
             else:
-                start = robot.theta_ref
-            attempt = reacher.attempt(sphere.position(zen, azi), start)
-            residual[i, j] = attempt.ik.residual
-            if not attempt.ik.success:
-                continue
-            success[i, j] = True
-            theta[i, j] = attempt.ik.theta if attempt.theta is None else attempt.theta
-            if setup.environment is not None:
-                clearance[i, j] = attempt.clearance
-                taken[i, j] = attempt.theta is None
-            manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
+                record(i, j, robot.theta_ref)
+            if progress is not None:
+                progress(i * n_a + j + 1, n_z * n_a)
+    # The chain gives each cell one start; a cell it left blocked may be clear from another neighbour's
+    # posture (another IK branch, as the placement's chain of lights may bring): grow the clear region
+    # until no blocked cell next to a clear one becomes clear from that one's angles.
+    tried: set[tuple[int, int, int, int]] = set()
+    grown = True
+    while grown:
+        grown = False
+        clear = success & ~taken
+        for i, j in zip(*np.nonzero(~clear), strict=True):
+            for ni, nj in ((i, (j - 1) % n_a), (i, (j + 1) % n_a), (i - 1, j), (i + 1, j)):
+                if 0 <= ni < n_z and clear[ni, nj] and (i, j, ni, nj) not in tried:
+                    tried.add((i, j, ni, nj))
+                    record(i, j, theta[ni, nj])
+                    if success[i, j] and not taken[i, j]:
+                        grown = True
+                        break
     return ReachabilityMap(
         robot.name,
         zenith,

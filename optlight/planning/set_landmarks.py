@@ -5,7 +5,13 @@ per-azimuth search (:mod:`optlight.planning.lightsets`):
 
 - ``photometric_stereo`` / ``rti``: :func:`~optlight.planning.lightsets.design_light_set` of the
   problem's set cost (:func:`~optlight.planning.lightsets.set_cost_from_problem`, on the search
-  scene) over the allowed cap ``Cap.from_sphere(setup.sphere)`` (the camera's view taken out);
+  scene) over the allowed cap ``Cap.from_sphere(setup.sphere)`` (the camera's view taken out) and,
+  with ``[lightset] design_over = "reachable"`` (the default), over the lights the robot reaches
+  there clear of the environment and the camera's view: a reachability map of the cap first
+  (:func:`~optlight.planning.reach.reachability_map`), whose smooth clear field
+  (:class:`~optlight.planning.reach.ClearField`) is a row f(d_i) ≥ :data:`CLEAR_MARGIN` of the set
+  NLP for every light. Designed on the cap alone, a set loses the lights the arm reaches only
+  across the view cone, and their replacements are chosen one at a time;
 - ``grid``: the problem's grid mapped to the nearest lights on that cap
   (:func:`~optlight.planning.lightsets.map_grid`), every replacement reported.
 
@@ -25,13 +31,15 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
+import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from optlight.geometry import direction_in_sphere_frame
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
     Cap,
@@ -44,7 +52,8 @@ from optlight.planning.lightsets import (
     set_cost_from_problem,
 )
 from optlight.planning.path import azimuth_order, shortest_open_tour
-from optlight.planning.policy import Attempt, Reacher, why_moved
+from optlight.planning.policy import Attempt, Reacher, too_close_mm, why_moved
+from optlight.planning.reach import ClearField, ReachabilityMap, reachability_map
 from optlight.setup import Setup
 
 Array = NDArray[np.float64]
@@ -65,12 +74,23 @@ class SetDesign:
     requested_cost: float | None
     grid: GridMapping | None
     time_s: float
+    reach: ReachabilityMap | None = None
 
 
-def landmarks_of_set(setup: Setup) -> tuple[LandmarkSet, SetDesign]:
-    """The problem's light set as landmarks (module docstring), and what was requested."""
+#: Smallest value of the clear field (:class:`~optlight.planning.reach.ClearField`, in [−1, 1]) at a
+#: designed light: well inside the map's clear cells, not on the border with a blocked one.
+CLEAR_MARGIN = 0.5
+
+
+def landmarks_of_set(
+    setup: Setup, reacher: Reacher | None = None, progress: Callable[[int, int], None] | None = None
+) -> tuple[LandmarkSet, SetDesign]:
+    """The problem's light set as landmarks (module docstring), and what was requested.
+    ``reacher``: the setup's, when one is built; ``progress(done, total)`` over the reachability
+    map's cells."""
     t0 = time.perf_counter()
     spec, cap = setup.problem.lightset, allowed_cap(setup)
+    reach: ReachabilityMap | None = None
     cost: SetCost | None = None
     requested_cost: float | None = None
     grid: GridMapping | None = None
@@ -87,7 +107,16 @@ def landmarks_of_set(setup: Setup) -> tuple[LandmarkSet, SetDesign]:
         status: Literal["set", "grid"] = "grid"
     else:
         cost = set_cost_from_problem(setup.problem, setup.search_scene, setup.search_objective)
-        result = design_light_set(cost, spec.count, cap, starts=spec.starts, seed=spec.seed)
+        allowed = None
+        if spec.design_over == "reachable":
+            step = spec.reach_step_deg
+            reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
+            field = ClearField.from_map(reach)
+
+            def allowed(d: ca.MX) -> ca.MX:
+                return CLEAR_MARGIN - field.casadi(d)
+
+        result = design_light_set(cost, spec.count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed)
         directions = requested = result.directions
         requested_cost, status = result.cost, "set"
     # indexed in azimuth order: the placement chains each light's posture from the previous one's,
@@ -109,7 +138,7 @@ def landmarks_of_set(setup: Setup) -> tuple[LandmarkSet, SetDesign]:
         view_zenith=setup.view_zenith,
         notes=tuple(_grid_notes(grid)),
     )
-    return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed)
+    return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed, reach)
 
 
 def allowed_cap(setup: Setup) -> Cap:
@@ -169,6 +198,9 @@ def joint_distance(thetas: Array, order: ArrayLike) -> float:
     return float(np.abs(steps).max(axis=1, initial=0.0).sum())
 
 
+#: Clear cells of the design's reachability map whose postures start the IK at a light the previous
+#: light's posture does not reach clear, before a replacement is looked for.
+MAP_STARTS = 3
 #: Candidates a replacement scores: the nearest this many lattice lights to the light replaced.
 REPLACEMENT_CANDIDATES = 120
 #: Of those, how many it tries with the robot, best score first, before it gives the light up.
@@ -177,13 +209,18 @@ REPLACEMENT_TRIES = 30
 
 class SetReplacement:
     """The light set's rule for a light the robot cannot reach clear (a
-    :data:`~optlight.planning.policy.Replacement`): of the allowed cap's lattice at ``[lightset]
-    candidate_spacing_deg``, the :data:`REPLACEMENT_CANDIDATES` lights nearest the one replaced are
-    scored — designed kinds by the set cost with the other lights where they are (those replaced
+    :data:`~optlight.planning.policy.Replacement`).
+
+    A set designed over the reachable lights has its design's reachability map: the light itself is
+    first tried from the clear postures the map found at the :data:`MAP_STARTS` cells nearest it (the
+    previous light's posture may be on an IK branch that blocks the camera there). Else, of the
+    allowed cap's lattice at ``[lightset] candidate_spacing_deg``, the :data:`REPLACEMENT_CANDIDATES`
+    lights nearest the one replaced (with a map, only those its clear field puts on the clear side)
+    are scored — designed kinds by the set cost with the other lights where they are (those replaced
     before at their replacements), a grid by the angle to its requested direction — and tried with
-    the robot (:meth:`Reacher.attempt`) best score first; the first the robot reaches clear from the
-    previous light's angles (its IK branch), else the first it reaches clear from θ_ref with
-    restarts, replaces it (status "placed")."""
+    the robot (:meth:`Reacher.attempt`) best score first: from the previous light's angles (its IK
+    branch), then from the map's posture nearest each, then from θ_ref with restarts. The first
+    reached clear replaces it (status "placed")."""
 
     def __init__(
         self, setup: Setup, design: SetDesign, landmarks: Sequence[Landmark], reacher: Reacher
@@ -194,6 +231,20 @@ class SetReplacement:
         self.directions = dict(
             zip((lm.index for lm in landmarks), directions_of(setup, landmarks), strict=True)
         )
+        reach = design.reach
+        self.field = ClearField.from_map(reach) if reach is not None else None
+        if reach is not None:
+            zenith, azimuth = np.meshgrid(reach.zenith, reach.azimuth, indexing="ij")
+            clear = reach.clear.ravel()
+            self.map_cells = direction_in_sphere_frame(zenith, azimuth).reshape(-1, 3)[clear]
+            self.map_thetas = reach.theta.reshape(-1, reach.theta.shape[-1])[clear]
+
+    def _map_postures(self, direction: Array, count: int = MAP_STARTS) -> list[Array]:
+        """The clear joint angles the design's reachability map found at the ``count`` clear cells
+        nearest ``direction`` (sphere frame), nearest first; none without a map."""
+        if self.field is None:
+            return []
+        return list(self.map_thetas[np.argsort(-(self.map_cells @ direction))[:count]])
 
     def _scores(self, index: int, candidates: Array) -> Array:
         """Each candidate's score as light ``index`` (lower is better)."""
@@ -208,18 +259,43 @@ class SetReplacement:
     ) -> tuple[Landmark, Array, str] | str:
         setup, sphere = self.setup, self.setup.sphere
         here = self.directions[lm.index]
+        for theta_map in self._map_postures(here):
+            theta = self.reacher.attempt(lm.position, theta_map, restarts=False).theta
+            if theta is not None:
+                best = attempts[0]
+                reason = (
+                    f"{best.row} {too_close_mm(best.clearance):.1f} mm too close"
+                    if best.ik.success
+                    else "no convergence"
+                )
+                note = (
+                    "reached clear from the posture the reachability map found at a clear cell near it "
+                    f"(the IK from the previous light's posture and from θ_ref: {reason})"
+                )
+                return replace(lm, status="placed"), theta, note
         nearest = np.argsort(-(self.lattice @ here))[:REPLACEMENT_CANDIDATES]
+        if self.field is not None:
+            nearest = nearest[self.field.numpy(self.lattice[nearest]) > 0.0]
         scores = self._scores(lm.index, self.lattice[nearest])
         tried = nearest[np.argsort(scores, kind="stable")][:REPLACEMENT_TRIES]
         # first from the previous light's angles alone (the posture chain's IK branch: a restart may
-        # land on another, a reconfiguration the trajectory cannot make), then from θ_ref with restarts
+        # land on another, a reconfiguration the trajectory cannot make), then from the map's
+        # posture nearest each, then from θ_ref with restarts
+        passes: list[Callable[[Array], list[tuple[Array, bool]]]] = [
+            lambda _: [(previous, False)],
+            lambda d: [(t, False) for t in self._map_postures(d, 1)],
+            lambda _: [(setup.robot.theta_ref, True)],
+        ]
         found = None
-        for start, restarts in ((previous, False), (setup.robot.theta_ref, True)):
+        for starts in passes:
             for k in tried:
                 position = sphere.center + sphere.radius * sphere.rotation @ self.lattice[k]
-                theta = self.reacher.attempt(position, start, restarts=restarts).theta
-                if theta is not None:
-                    found = (self.lattice[k], theta)
+                for start, restarts in starts(self.lattice[k]):
+                    theta = self.reacher.attempt(position, start, restarts=restarts).theta
+                    if theta is not None:
+                        found = (self.lattice[k], theta)
+                        break
+                if found is not None:
                     break
             if found is not None:
                 break
@@ -259,7 +335,10 @@ def set_summary(
     kinds), and the capture order's joint travel against azimuth order's."""
     achieved = directions_of(setup, placed)
     requested = design.requested[[lm.index for lm in placed]]
-    moved = np.degrees(np.arccos(np.clip(np.sum(achieved * requested, axis=1), -1.0, 1.0)))
+    # atan2 of |a×b| and a·b: arccos near 1 turns float rounding into micro-degrees of "move"
+    moved = np.degrees(
+        np.arctan2(np.linalg.norm(np.cross(achieved, requested), axis=1), np.sum(achieved * requested, axis=1))
+    )
     summary: dict[str, Any] = {
         "kind": design.kind,
         "requested": len(design.requested),
@@ -276,6 +355,13 @@ def set_summary(
             "azimuth": joint_distance(thetas, azimuth_order([lm.azimuth for lm in placed])),
         },
     }
+    if design.reach is not None:
+        reach = design.reach
+        summary["designed_over"] = {
+            "map_cells": int(reach.success.size),
+            "clear_pct": 100.0 * reach.clear_fraction,
+            "map_time_s": reach.time_s,
+        }
     if design.grid is not None:
         summary["grid"] = design.grid.report()
     if design.cost is not None:
