@@ -273,3 +273,27 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
     assert barriers == [None, trajectory.WARM_MU_INIT] and result.success
     alone = real(trajectory.TrajectoryOptimizer(free.robot, joint_weights=1.0 / free.limits.velocity**2, mu_init=1e-4), path, free.sphere, warm)
     assert result.iterations > alone.iterations  # both tries counted
+
+
+def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Setup, setup, monkeypatch) -> None:
+    """A knot the per-knot IK missed leaves the warm start centimetres off the sphere: the small
+    barrier has no feasible point to stay near, so a failed solve is not tried again."""
+    from optlight.planning import trajectory
+
+    _, _, path, warm = setup
+    real = trajectory.TrajectoryOptimizer.solve
+    barriers = []
+
+    def fails(self, path_, sphere, theta0, fixed_start=False):
+        barriers.append(self.options.get("ipopt.mu_init"))
+        return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
+
+    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
+    free = replace(small_setup, environment=None)
+    assert trajectory._warm_start_on_sphere(free, path, warm)
+    missed = warm.copy()
+    missed[3] += 0.05  # one knot: the light ~2 cm off the sphere
+    assert not trajectory._warm_start_on_sphere(free, path, missed)
+    with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
+        trajectory.optimize_knots(free, path, missed)
+    assert barriers == [None]
