@@ -189,11 +189,11 @@ def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
         f"| moved by the placement | {len(lightset['moved_by_placement'])} |",
         f"| dropped | {len(lightset['dropped'])} |",
     ]
-    if "designed_over" in lightset:
-        over = lightset["designed_over"]
+    if "reach_map" in lightset:
+        reach = lightset["reach_map"]
         lines.append(
-            f"| designed over | the lights the robot reaches clear: {over['clear_pct']:.0f} % of the cap's "
-            f"{over['map_cells']} reachability-map cells (map {over['map_time_s']:.1f} s; `lightset_reach.png`) |"
+            f"| reachability map (`lightset_reach.png`) | {reach['clear_pct']:.0f} % of the cap's "
+            f"{reach['map_cells']} cells reached clear, in {reach['map_time_s']:.1f} s |"
         )
     if "grid" in lightset:
         grid = lightset["grid"]

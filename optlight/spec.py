@@ -517,8 +517,9 @@ class LightSetSpec:
     )
     design_over: Literal["reachable", "cap"] = key(
         "reachable",
-        "design photometric_stereo and rti sets over the lights the robot reaches clear (a reachability "
-        "map of the cap first), or over the whole allowed cap (lights the robot cannot reach are replaced)",
+        "map where the robot reaches the light clear first (a reachability map of the cap) and design "
+        "photometric_stereo and rti sets over those lights (a grid's replacements start from the map too), "
+        "or design on the whole allowed cap (lights the robot cannot reach are then replaced one by one)",
     )
     reach_step_deg: float = key(
         5.0,

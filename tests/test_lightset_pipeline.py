@@ -16,7 +16,6 @@ from optlight.photometric_stereo import gbuffer_normal_map
 from optlight.pipeline import choose_captures, place_captures
 from optlight.plan import PHOTOMETRIC_STEREO_FOLDER, Plan
 from optlight.planning.policy import Reacher
-from optlight.planning.reach import ClearField
 from optlight.planning.set_landmarks import CLEAR_MARGIN, SetReplacement, directions_of
 from optlight.setup import Setup
 
@@ -121,7 +120,7 @@ def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: 
     light there (pinocchio) with every environment row clear."""
     sections: dict = {"count": 8, "starts": 1, "design_over": "cap"}  # the rule alone, without the map
     if kind == "grid":
-        sections = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8}
+        sections = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8, "design_over": "cap"}
     setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32, lightset=sections))
     _, design, captures, _ = choose_captures(setup)
     assert design is not None
@@ -180,8 +179,8 @@ def test_a_set_designed_over_the_reachable_lights_is_placed_where_it_was_designe
         placed[over] = (len(placement.landmarks), int(np.sum(np.sum(achieved * requested, axis=1) < 1 - 1e-12)))
     assert placed["cap"][1] >= 2  # replaced
     assert placed["reachable"] == (8, 0)
-    assert design.reach is not None
-    assert np.all(ClearField.from_map(design.reach).numpy(design.requested) >= CLEAR_MARGIN - 1e-6)
+    assert design.reach is not None and design.field is not None
+    assert np.all(design.field.numpy(design.requested) >= CLEAR_MARGIN - 1e-6)
     env = setup.environment
     assert env is not None
     ik_tol = math.sqrt(setup.problem.solver.ik_tol)  # the IK converges at |e|² < ik_tol

@@ -81,6 +81,12 @@ class ReachabilityMap:
         return self.success & ~self.taken
 
     @property
+    def directions(self) -> Array:
+        """(Z·A, 3) unit directions of the cells (sphere frame), row-major like ``clear.ravel()``."""
+        zenith, azimuth = np.meshgrid(self.zenith, self.azimuth, indexing="ij")
+        return direction_in_sphere_frame(zenith, azimuth).reshape(-1, 3)
+
+    @property
     def reachable_fraction(self) -> float:
         """Fraction of the grid cells the IK reached (whether or not the environment takes them)."""
         return float(self.success.mean())
@@ -225,14 +231,9 @@ class ClearField:
     def from_map(cls, reach: ReachabilityMap, width: float | None = None) -> ClearField:
         """The field of ``reach``'s cells; ``width`` σ (rad) defaults to half the map's zenith step,
         so that each point is decided by its nearest cells."""
-        zenith, azimuth = np.meshgrid(reach.zenith, reach.azimuth, indexing="ij")
         if width is None:
             width = 0.5 * float(np.diff(reach.zenith).min()) if len(reach.zenith) > 1 else 0.05
-        return cls(
-            direction_in_sphere_frame(zenith, azimuth).reshape(-1, 3),
-            np.where(reach.clear, 1.0, -1.0).ravel(),
-            1.0 / width**2,
-        )
+        return cls(reach.directions, np.where(reach.clear, 1.0, -1.0).ravel(), 1.0 / width**2)
 
     def numpy(self, directions: ArrayLike) -> Array:
         """f at unit directions (..., 3), sphere frame."""

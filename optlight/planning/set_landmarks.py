@@ -13,7 +13,8 @@ per-azimuth search (:mod:`optlight.planning.lightsets`):
   NLP for every light. Designed on the cap alone, a set loses the lights the arm reaches only
   across the view cone, and their replacements are chosen one at a time;
 - ``grid``: the problem's grid mapped to the nearest lights on that cap
-  (:func:`~optlight.planning.lightsets.map_grid`), every replacement reported.
+  (:func:`~optlight.planning.lightsets.map_grid`), every replacement reported; with ``design_over =
+  "reachable"`` the map is made too, for the placement's replacements (:class:`SetReplacement`).
 
 Each light becomes a :class:`~optlight.planning.landmarks.Landmark` (status "set" or "grid"; its
 ``cost`` is the image objective there, NumPy renderer with shadow rays at the search resolution), so
@@ -39,7 +40,6 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.geometry import direction_in_sphere_frame
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
     Cap,
@@ -66,7 +66,8 @@ VIEW_MARGIN = math.radians(3.0)
 class SetDesign:
     """What the set stage asked for: ``kind``, the ``requested`` directions (N, 3, sphere frame),
     the set ``cost`` function (None for a grid) and its value at the requested directions, the grid
-    mapping (grid kind), the design's wall time (s)."""
+    mapping (grid kind), the design's wall time (s); a set designed over the reachable lights, the
+    reachability map ``reach`` and its clear ``field``."""
 
     kind: str
     requested: Array
@@ -75,6 +76,7 @@ class SetDesign:
     grid: GridMapping | None
     time_s: float
     reach: ReachabilityMap | None = None
+    field: ClearField | None = None
 
 
 #: Smallest value of the clear field (:class:`~optlight.planning.reach.ClearField`, in [−1, 1]) at a
@@ -91,9 +93,14 @@ def landmarks_of_set(
     t0 = time.perf_counter()
     spec, cap = setup.problem.lightset, allowed_cap(setup)
     reach: ReachabilityMap | None = None
+    field: ClearField | None = None
     cost: SetCost | None = None
     requested_cost: float | None = None
     grid: GridMapping | None = None
+    if spec.design_over == "reachable":
+        step = spec.reach_step_deg
+        reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
+        field = ClearField.from_map(reach)
     if spec.kind == "grid":
         wanted = grid_from_problem(setup.problem)
         grid = map_grid(
@@ -108,13 +115,11 @@ def landmarks_of_set(
     else:
         cost = set_cost_from_problem(setup.problem, setup.search_scene, setup.search_objective)
         allowed = None
-        if spec.design_over == "reachable":
-            step = spec.reach_step_deg
-            reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
-            field = ClearField.from_map(reach)
+        if field is not None:
+            clear = field  # for the closure: never None
 
             def allowed(d: ca.MX) -> ca.MX:
-                return CLEAR_MARGIN - field.casadi(d)
+                return CLEAR_MARGIN - clear.casadi(d)
 
         result = design_light_set(cost, spec.count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed)
         directions = requested = result.directions
@@ -138,7 +143,7 @@ def landmarks_of_set(
         view_zenith=setup.view_zenith,
         notes=tuple(_grid_notes(grid)),
     )
-    return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed, reach)
+    return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed, reach, field)
 
 
 def allowed_cap(setup: Setup) -> Cap:
@@ -231,12 +236,10 @@ class SetReplacement:
         self.directions = dict(
             zip((lm.index for lm in landmarks), directions_of(setup, landmarks), strict=True)
         )
-        reach = design.reach
-        self.field = ClearField.from_map(reach) if reach is not None else None
+        reach, self.field = design.reach, design.field
         if reach is not None:
-            zenith, azimuth = np.meshgrid(reach.zenith, reach.azimuth, indexing="ij")
             clear = reach.clear.ravel()
-            self.map_cells = direction_in_sphere_frame(zenith, azimuth).reshape(-1, 3)[clear]
+            self.map_cells = reach.directions[clear]
             self.map_thetas = reach.theta.reshape(-1, reach.theta.shape[-1])[clear]
 
     def _map_postures(self, direction: Array, count: int = MAP_STARTS) -> list[Array]:
@@ -357,7 +360,7 @@ def set_summary(
     }
     if design.reach is not None:
         reach = design.reach
-        summary["designed_over"] = {
+        summary["reach_map"] = {
             "map_cells": int(reach.success.size),
             "clear_pct": 100.0 * reach.clear_fraction,
             "map_time_s": reach.time_s,
