@@ -216,7 +216,7 @@ class SetReplacement:
     """The light set's rule for a light the robot cannot reach clear (a
     :data:`~optlight.planning.policy.Replacement`).
 
-    A set designed over the reachable lights has its design's reachability map: the light itself is
+    When the set stage made a reachability map (``design_over = "reachable"``), the light itself is
     first tried from the clear postures the map found at the :data:`MAP_STARTS` cells nearest it (the
     previous light's posture may be on an IK branch that blocks the camera there). Else, of the
     allowed cap's lattice at ``[lightset] candidate_spacing_deg``, the :data:`REPLACEMENT_CANDIDATES`
@@ -260,7 +260,7 @@ class SetReplacement:
     def __call__(
         self, lm: Landmark, attempts: Sequence[Attempt], previous: Array
     ) -> tuple[Landmark, Array, str] | str:
-        setup, sphere = self.setup, self.setup.sphere
+        setup = self.setup
         here = self.directions[lm.index]
         for theta_map in self._map_postures(here):
             theta = self.reacher.attempt(lm.position, theta_map, restarts=False).theta
@@ -284,24 +284,14 @@ class SetReplacement:
         # first from the previous light's angles alone (the posture chain's IK branch: a restart may
         # land on another, a reconfiguration the trajectory cannot make), then from the map's
         # posture nearest each, then from θ_ref with restarts
-        passes: list[Callable[[Array], list[tuple[Array, bool]]]] = [
-            lambda _: [(previous, False)],
-            lambda d: [(t, False) for t in self._map_postures(d, 1)],
-            lambda _: [(setup.robot.theta_ref, True)],
-        ]
-        found = None
-        for starts in passes:
-            for k in tried:
-                position = sphere.center + sphere.radius * sphere.rotation @ self.lattice[k]
-                for start, restarts in starts(self.lattice[k]):
-                    theta = self.reacher.attempt(position, start, restarts=restarts).theta
-                    if theta is not None:
-                        found = (self.lattice[k], theta)
-                        break
-                if found is not None:
-                    break
-            if found is not None:
-                break
+        found = self._first_clear(
+            self.lattice[tried],
+            [
+                lambda _: [(previous, False)],
+                lambda d: [(t, False) for t in self._map_postures(d, 1)],
+                lambda _: [(setup.robot.theta_ref, True)],
+            ],
+        )
         if found is not None:
             direction, theta = found
             before = self._score_text(lm.index, here)
@@ -320,6 +310,21 @@ class SetReplacement:
             f"nor is any of the {len(tried)} lights that best keep the set among the {len(nearest)} "
             f"nearest it (lattice at [lightset] candidate_spacing_deg) reachable clear"
         )
+
+    def _first_clear(
+        self, candidates: Array, passes: Sequence[Callable[[Array], list[tuple[Array, bool]]]]
+    ) -> tuple[Array, Array] | None:
+        """The first of ``candidates`` (K, 3, sphere frame; in order, pass by pass) the robot reaches
+        clear from one of the (start, restarts) pairs ``pass(direction)`` gives, and its angles."""
+        sphere = self.setup.sphere
+        for starts in passes:
+            for direction in candidates:
+                position = sphere.center + sphere.radius * sphere.rotation @ direction
+                for start, restarts in starts(direction):
+                    theta = self.reacher.attempt(position, start, restarts=restarts).theta
+                    if theta is not None:
+                        return direction, theta
+        return None
 
     def _score_text(self, index: int, direction: Array) -> str:
         """The score of ``direction`` as light ``index``, in words: the set cost, or the angle off the
