@@ -11,7 +11,8 @@ at once or not at all (:func:`optlight.export.write_results`):
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers);
 - for a light set, what :class:`~optlight.plan.Plan` adds: ``photometric_stereo/`` (the DiLiGenT
-  layout, :func:`optlight.datasets.model_capture`), ``normal_map.png`` and ``normal_error.png``.
+  layout, :func:`optlight.datasets.model_capture`), ``normal_map.png`` and ``normal_error.png``, and
+  with a reachability map (``[lightset] design_over = "reachable"``) ``lightset_reach.png``.
 """
 
 from __future__ import annotations

@@ -67,9 +67,10 @@ def test_diligent_folder_reads_back_with_the_achieved_lights(ps_plan: Plan, ps_f
     np.testing.assert_allclose(folder.directions, expected, atol=1e-6)
     assert folder.images.shape == (len(ps_plan.visited), 48, 48)
     np.testing.assert_array_equal(folder.mask, ps_plan.scene.gbuffer.mask)
-    for name in ("normal_map.png", "normal_error.png", "plan.json", "report.md"):
+    for name in ("normal_map.png", "normal_error.png", "lightset_reach.png", "plan.json", "report.md"):
         assert (ps_folder / name).is_file()
-    assert "## Light set" in (ps_folder / "report.md").read_text()
+    report = (ps_folder / "report.md").read_text()
+    assert "## Light set" in report and "reachability map (`lightset_reach.png`)" in report
 
 
 def test_recovered_normals_match_the_model(ps_plan: Plan, ps_folder: Path) -> None:
