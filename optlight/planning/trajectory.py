@@ -299,7 +299,7 @@ def optimize_knots(setup: Setup, path: LightPath, warm: Array, fixed_start: bool
     bowl put a capture's arm across the light's beam. Nor when the warm start is far from feasible
     (a knot on the sphere the per-knot IK missed: |h| above :data:`WARM_H_TOL`): there the small
     barrier has nothing to keep, and a path the arm cannot follow on the sphere took as long again
-    to be found infeasible (photometric_stereo, 300 more iterations, 5 s). Raises
+    to be found infeasible (photometric_stereo: 245 more iterations, 4 s). Raises
     :class:`SolverError` when the solves fail.
     """
     first = _active_rounds(setup, path, warm, fixed_start, None)
