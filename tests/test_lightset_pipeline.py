@@ -12,6 +12,7 @@ from conftest import reduced_problem
 
 import optlight
 from optlight.datasets import read_diligent
+from optlight.errors import UnreachableError
 from optlight.photometric_stereo import gbuffer_normal_map
 from optlight.pipeline import choose_captures, place_captures
 from optlight.plan import PHOTOMETRIC_STEREO_FOLDER, Plan
@@ -188,3 +189,16 @@ def test_a_set_designed_over_the_reachable_lights_is_placed_where_it_was_designe
     for lm, theta in zip(placement.landmarks, placement.thetas, strict=True):
         assert np.linalg.norm(setup.robot.light_pose(theta)[0] - lm.position) <= ik_tol
         assert env.worst_sphere_row(setup.robot, theta)[0] >= 0.0
+
+
+def test_a_set_the_robot_reaches_nowhere_is_refused_after_the_map() -> None:
+    """The Panda 3 m from the object reaches no cell of the cap: the set stage says so, naming the
+    map and what to change, before any design or placement NLP."""
+    problem = reduced_problem(
+        "rti_dome",
+        camera_px=32,
+        robot={"base_position_m": [3.0, 0.0, 0.0]},
+        lightset={"count": 4, "starts": 1, "reach_step_deg": 20.0},
+    )
+    with pytest.raises(UnreachableError, match=r"reaches no light of the cap clear .*reachability map, 27 cells, 0 %"):
+        choose_captures(Setup.from_problem(problem))

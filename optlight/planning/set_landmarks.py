@@ -40,6 +40,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from optlight.errors import UnreachableError
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
     Cap,
@@ -100,6 +101,12 @@ def landmarks_of_set(
     if spec.design_over == "reachable":
         step = spec.reach_step_deg
         reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
+        if not reach.clear.any():  # nothing to design over or replace with: say so before the NLPs
+            raise UnreachableError(
+                f"{setup.robot.name} reaches no light of the cap clear of the environment and the camera's "
+                f"view (reachability map, {reach.success.size} cells, {100 * reach.reachable_fraction:.0f} % "
+                "reached by the IK); move the robot base ([robot] base_position_m) or widen [light_sphere]"
+            )
         field = ClearField.from_map(reach)
     if spec.kind == "grid":
         wanted = grid_from_problem(setup.problem)
