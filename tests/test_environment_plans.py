@@ -149,6 +149,41 @@ def test_rows_left_out_that_the_solution_breaks_join_the_nlp(
     assert result.iterations >= 2
 
 
+def test_the_transfer_nlp_with_the_rows_that_can_bind_finds_the_all_rows_transfer(
+    constrained: optlight.Plan, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The transfer from the last capture back to the start configuration goes round the obstacles (its
+    joint-space line does not): solved with the clearance rows near the line, it is the transfer
+    solved with every row (ACTIVE_DISTANCE infinite selects them all), clear of every row by the
+    padding (the NumPy sphere model, pinocchio), in fewer rows (the same cost to 1e-6)."""
+    from optlight.planning import trajectory
+
+    sizes: list[int] = []
+    real = trajectory._transfer_nlp
+
+    def counting(setup: Setup, rows: object, *args: object) -> tuple[np.ndarray | None, str]:
+        sizes.append(rows.size1_out(0))  # type: ignore[attr-defined]
+        return real(setup, rows, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(trajectory, "_transfer_nlp", counting)
+    setup = constrained.setup
+    env = setup.environment
+    assert env is not None
+    last = constrained.nlp.theta[-1]
+    active = trajectory.plan_transfer(setup, last, setup.start)
+    assert sizes, "the transfer NLP did not run"
+    active_rows = sizes[-1]
+    monkeypatch.setattr(trajectory, "ACTIVE_DISTANCE", np.inf)
+    every = trajectory.plan_transfer(setup, last, setup.start)
+    assert active_rows < sizes[-1]
+    line_worst = min(env.sphere_clearance(setup.robot, t)[0].min() for t in np.linspace(last, setup.start, 20))
+    assert line_worst < trajectory.TRANSFER_PADDING
+    np.testing.assert_allclose(active, every, atol=1e-4)  # IPOPT's tolerance apart
+    assert trajectory.knot_cost(setup, active) == pytest.approx(trajectory.knot_cost(setup, every), rel=1e-6)
+    worst = min(env.sphere_clearance(setup.robot, theta)[0].min() for theta in active[1:-1])
+    assert worst >= trajectory.TRANSFER_PADDING - 1e-6
+
+
 def test_the_unconstrained_plan_collides_and_is_refused(
     unconstrained: optlight.Plan, collision: Problem, tmp_path: Path
 ) -> None:

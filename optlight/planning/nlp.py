@@ -21,6 +21,7 @@ built ``nlpsol`` and returns a typed :class:`Solve`. Lengths in metres, angles i
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -110,13 +111,21 @@ def arc_rows(a: Symbolic, center: Any, normal: Any, u0: Any, u1: Any) -> tuple[S
     return plane, wedge
 
 
-def environment_rows(environment: Environment, robot: Robot, theta: Symbolic, *, view: bool = True) -> Symbolic:
-    """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions),
-    then (``view`` and the view cone on) its view rows; the CasADi functions are the environment's,
-    built once per robot."""
+def environment_rows(
+    environment: Environment,
+    robot: Robot,
+    theta: Symbolic,
+    *,
+    view: bool = True,
+    clearance_rows: Sequence[int] | None = None,
+) -> Symbolic:
+    """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions;
+    only ``clearance_rows`` of them when given, see :meth:`Environment.near_rows`), then (``view`` and
+    the view cone on) its view rows; the CasADi functions are the environment's, built once per robot
+    and row selection."""
     rows = []
     if environment.collisions:
-        rows.append(environment.clearance_function(robot)(theta))
+        rows.append(environment.clearance_function(robot, clearance_rows)(theta))
     if view and environment.view_cone is not None:
         rows.append(environment.view_cone_function(robot)(theta))
     return ca.vertcat(*rows) if rows else ca.MX(0, 1)

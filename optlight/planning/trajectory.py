@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import casadi as ca
 import numpy as np
@@ -266,7 +267,11 @@ def knot_cost(setup: Setup, theta: Array) -> float:
     return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - setup.robot.theta_ref) ** 2))
 
 
-#: Clearance rows below this (m) at some knot join the trajectory NLP (:func:`optimize_knots`).
+#: What an NLP solve of :func:`solve_active_rows` returns.
+_Result = TypeVar("_Result")
+
+#: Clearance rows below this (m) at some knot join the trajectory NLP (:func:`optimize_knots`) and the
+#: transfer NLP (:func:`plan_transfer`).
 ACTIVE_DISTANCE = 0.15
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
@@ -336,35 +341,60 @@ def _warm_start_on_sphere(setup: Setup, path: LightPath, warm: Array) -> bool:
 def _active_rounds(
     setup: Setup, path: LightPath, warm: Array, fixed_start: bool, mu_init: float | None
 ) -> TrajectoryNLPResult:
-    """The solves of :func:`optimize_knots` with the active clearance rows, from ``warm``, IPOPT's
-    initial barrier parameter ``mu_init``; the last solve, with the iterations and time of all."""
+    """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
+    from ``warm``, IPOPT's initial barrier parameter ``mu_init``; the last solve, with the iterations
+    and time of all."""
     env = setup.environment
-    collisions = env is not None and env.collisions
-    rows: tuple[int, ...] | None = env.near_rows(setup.robot, warm, ACTIVE_DISTANCE) if env and collisions else None
-    iterations, time_s = 0, 0.0
-    for round_ in range(ACTIVE_ROUNDS + 1):
+    solves: list[TrajectoryNLPResult] = []
+
+    def solve(rows: tuple[int, ...] | None, start: Array) -> tuple[TrajectoryNLPResult, Array | None]:
         optimizer = TrajectoryOptimizer(
             setup.robot,
             path_mode=setup.trajectory_spec.path,
             max_step=setup.trajectory_spec.max_step_rad,
             joint_weights=1.0 / setup.limits.velocity**2,
-            clearance=env.clearance_function(setup.robot, rows) if env and collisions else None,
+            clearance=env.clearance_function(setup.robot, rows) if env and env.collisions else None,
             view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
             mu_init=mu_init,
         )
-        nlp = optimizer.solve(path, setup.sphere, warm, fixed_start)
-        iterations, time_s = iterations + nlp.iterations, time_s + nlp.time_s
-        if env is None or rows is None or not nlp.success:
+        solves.append(optimizer.solve(path, setup.sphere, start, fixed_start))
+        return solves[-1], solves[-1].theta if solves[-1].success else None
+
+    nlp = solve_active_rows(setup, warm, solve)
+    return dataclasses.replace(
+        nlp, iterations=sum(s.iterations for s in solves), time_s=sum(s.time_s for s in solves)
+    )
+
+
+def solve_active_rows(
+    setup: Setup,
+    warm: Array,
+    solve: Callable[[tuple[int, ...] | None, Array], tuple[_Result, Array | None]],
+    bound: float = 0.0,
+) -> _Result:
+    """An NLP over knots solved with only the clearance rows that can bind: ``solve(rows, start)``
+    solves it from the knots ``start`` (K, n) with the clearance rows ``rows`` (indices into
+    :meth:`Environment.clearance_function`'s; None: all) and returns its result and its knots (None
+    when it failed). First the rows below :data:`ACTIVE_DISTANCE` at some knot of ``warm``; when the
+    solution breaks a row left out (below ``bound``, m), the broken rows and the rows near the
+    solution join, and the NLP is solved again from the solution; after :data:`ACTIVE_ROUNDS` such
+    solves, the last has every row. Without clearance rows (no environment, or no collisions
+    modelled): one solve with ``rows`` None."""
+    env, robot = setup.environment, setup.robot
+    rows = env.near_rows(robot, warm, ACTIVE_DISTANCE) if env is not None and env.collisions else None
+    for round_ in range(ACTIVE_ROUNDS + 1):
+        result, theta = solve(rows, warm)
+        if env is None or rows is None or theta is None:
             break
-        broken = set(env.near_rows(setup.robot, nlp.theta, 0.0)) - set(rows)
+        broken = set(env.near_rows(robot, theta, bound)) - set(rows)
         if not broken:
             break
-        near = set(env.near_rows(setup.robot, nlp.theta, ACTIVE_DISTANCE))
+        near = set(env.near_rows(robot, theta, ACTIVE_DISTANCE))
         rows = tuple(sorted(set(rows) | broken | near)) if round_ + 1 < ACTIVE_ROUNDS else None
-        warm = nlp.theta
-    return dataclasses.replace(nlp, iterations=iterations, time_s=time_s)
+        warm = theta
+    return result
 
 
 #: Knots of a transfer (start → first landmark, last landmark → start) at most this far apart (rad).
@@ -383,8 +413,9 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``) at every knot,
     by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
     (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the velocity limits) s.t. the rows ≥
-    :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed. When the
-    NLP fails from the line (a line deep in an obstacle can leave IPOPT in a local infeasibility), it
+    :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed, with the
+    clearance rows that can bind (:func:`solve_active_rows`, as the trajectory NLP: with all 229 rows
+    per knot the exact Hessian made table_wall's two transfers 2.1 s). When the NLP fails from the line (a line deep in an obstacle can leave IPOPT in a local infeasibility), it
     starts again from ``detour`` (K', n), a known clear way from ``start`` to ``goal`` (the way back
     along the plan), which it shortens. Raises :class:`SolverError` when that fails too."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
@@ -402,13 +433,22 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
 
     if all(rows(theta).min(initial=np.inf) >= TRANSFER_PADDING for theta in line[1:-1]):
         return line
-    q = ca.MX.sym("q", robot.n)
-    row_function = ca.Function("transfer_rows", [q], [environment_rows(environment, robot, q, view=view)])
+
+    def solve(
+        clearance_rows: tuple[int, ...] | None, initial: Array
+    ) -> tuple[tuple[Array | None, str], Array | None]:
+        q = ca.MX.sym("q", robot.n)
+        row_function = ca.Function(
+            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=clearance_rows)]
+        )
+        knots, status = _transfer_nlp(setup, row_function, start, goal, initial)
+        return (knots, status), knots
+
     status = ""
     for initial in (line, None if detour is None else _thinned(np.asarray(detour, float), TRANSFER_STEP)):
         if initial is None or len(initial) < 3:
             continue
-        knots, status = _transfer_nlp(setup, row_function, start, goal, initial[1:-1])
+        knots, status = solve_active_rows(setup, initial[1:-1], solve, bound=TRANSFER_PADDING - 1e-8)
         if knots is not None and all(rows(t).min(initial=np.inf) >= TRANSFER_PADDING - 1e-8 for t in knots):
             return np.vstack([start, knots, goal])
     raise SolverError(
