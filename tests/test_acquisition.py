@@ -16,13 +16,13 @@ from conftest import REACH_ONLY, reduced_problem
 import optlight
 from optlight import cli
 from optlight.acquisition import Acquisition, acquire, execute, photometric_servo, servo_functions
-from optlight.capture import ModelCamera
+from optlight.capture import ModelCamera, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.errors import OptlightError
 from optlight.export import MANIFEST
 from optlight.planning.nlp import sphere_position
 from optlight.setup import Setup
-from optlight.spec import WorldSpec
+from optlight.spec import WorldSpec, problem_from_dict
 
 #: A world the model gets wrong: a brighter light, more ambient, a gamma-encoding camera.
 MISMATCH = {"power_scale": 1.6, "ambient": 0.1, "gamma": 2.2}
@@ -86,6 +86,31 @@ def test_a_replan_that_fails_verification_ends_the_loop_and_the_best_plan_stands
     assert len(plans) == 2 and len(result.iterations) == 1  # the re-plan was never run
     assert result.best is result.open_loop and result.best.plan is plans[0]
     assert result.status == "re-plan failed verification (landmark); the robot does not run it"
+
+
+def test_against_a_photographed_reference_the_loop_corrects_a_darker_face(tmp_path: Path) -> None:
+    """A lab's reference: the camera's own image at a light the robot reaches (35°, 120°), read as
+    ``[objective.reference] kind = "image"``. The face is half as bright as the model thinks: the
+    open loop's model matches the photograph's dark histogram with lights too oblique; calibrated
+    (power × albedo ≈ 0.5: the two scale the image alike), the re-plan measures a fraction of the open
+    loop's cost and predicts it."""
+    world = {"albedo_scale": 0.5}
+    problem = tiny(**world)
+    setup = Setup.from_problem(problem)
+    light = setup.sphere.position(np.deg2rad(35.0), np.deg2rad(120.0))
+    photo = ModelCamera(setup.scene, problem.world).capture(light).image
+    path = write_capture_png(tmp_path / "photograph.png", photo, setup.scene.light.saturation)
+    data = problem.to_dict()
+    data["objective"]["reference"] = {"kind": "image", "image": str(path)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = acquire(problem_from_dict(data, source=problem.source), "model")
+    first, best = result.open_loop, result.best
+    assert best.index > 0 and best.measured_cost <= 0.2 * first.measured_cost
+    assert best.modelled_cost == pytest.approx(best.measured_cost, rel=0.05)
+    calibration = result.calibration
+    assert calibration is not None
+    assert calibration.power * np.median(calibration.albedo_factor) == pytest.approx(0.5, rel=0.05)
 
 
 def test_captures_are_where_forward_kinematics_puts_the_light(mismatched: Acquisition) -> None:
