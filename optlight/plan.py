@@ -123,7 +123,10 @@ class Plan:
 
     def preview(self) -> Preview:
         """The Meshcat preview: landmarks coloured by cost, the planned path, the trajectory as an
-        animation, the object shaded for the first capture. ``.save_html(path)`` or ``.show()``."""
+        animation, the object shaded for the first capture, the obstacles the plan keeps clear of
+        (the object's bounding ball left out: its mesh is drawn). ``.save_html(path)`` or ``.show()``."""
+        environment = self.setup.environment
+        obstacles = environment.obstacles if environment is not None and environment.collisions else ()
         return Preview(
             self.scene,
             self.robot,
@@ -132,6 +135,7 @@ class Plan:
             self.robot.light_positions(self.nlp.theta),  # the knots, off the sphere on the transfers
             self.trajectory,
             light_position=self.visited[0].position,
+            obstacles=[o for o in obstacles if o.name != "object"],
         )
 
     def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:

@@ -136,7 +136,7 @@ def report_markdown(
         setup.problem.description,
         "",
         "Open `preview.html` in a browser for the 3-D preview (robot, object, light sphere, landmarks,",
-        "path, camera; the trajectory plays as an animation).",
+        "path, camera, the obstacles of `[environment]`; the trajectory plays as an animation).",
         "",
         "## Key numbers",
         "",

@@ -148,6 +148,76 @@ def test_scene_holds_every_part(commands, plan):
     assert commands[-1]["type"] == "set_animation"
 
 
+def surface_points(geometry: dict, n: int = 24) -> np.ndarray:
+    """Points (N, 3) on the surface of a three.js box, cylinder (along its y axis) or sphere, in its
+    own frame, from the geometry's parameters as the viewer reads them."""
+    rng = np.random.default_rng(0)
+    if geometry["type"] == "BoxGeometry":
+        half = 0.5 * np.array([geometry["width"], geometry["height"], geometry["depth"]])
+        points = rng.uniform(-1.0, 1.0, (n, 3))
+        face = rng.integers(0, 3, n)
+        points[np.arange(n), face] = np.sign(points[np.arange(n), face])  # onto a face
+        return points * half
+    if geometry["type"] == "CylinderGeometry":
+        a = rng.uniform(0.0, 2 * np.pi, n)
+        r, h = geometry["radiusTop"], geometry["height"]
+        side = np.column_stack([r * np.cos(a), rng.uniform(-h / 2, h / 2, n), r * np.sin(a)])
+        caps = np.column_stack([0.5 * r * np.cos(a), np.sign(a - np.pi) * h / 2, 0.5 * r * np.sin(a)])
+        return np.vstack([side, caps])
+    assert geometry["type"] == "SphereGeometry"
+    d = rng.normal(size=(n, 3))
+    return geometry["radius"] * d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_obstacles_are_drawn_as_the_shapes_the_verification_checks(plan):
+    """Points on each drawn obstacle's surface, through its pose, are on the shape's surface by the
+    shape's own signed distance (the one the NLP and the verification use): a rotated box and
+    cylinder, a ball, and the table's half-space, whose slab has its top face on the plane."""
+    from optlight.environment.shapes import Ball, Box, Cylinder, HalfSpace
+
+    scene, robot, landmarks, costs, path, _ = plan
+    turned = Rotation.from_euler("xyz", [0.3, -0.2, 0.5]).as_matrix()
+    shapes = {
+        "crate": Box("crate", np.array([0.4, -0.3, 0.2]), turned, np.array([0.05, 0.1, 0.15])),
+        "post": Cylinder("post", np.array([-0.3, 0.2, 0.5]), turned, 0.03, 0.5),
+        "lamp": Ball("lamp", np.array([0.1, 0.5, 0.9]), 0.07),
+        "table": HalfSpace("table", np.array([0.0, 0.0, 1.0]), 0.1),
+    }
+    commands = scene_commands(
+        Preview(scene, robot, landmarks, costs, path, obstacles=list(shapes.values()), show_robot=False).static_html()
+    )
+    drawn = objects(commands)
+    poses = {c["path"]: np.array(c["matrix"], float).reshape(4, 4).T for c in commands if c["type"] == "set_transform"}
+    for name, shape in shapes.items():
+        node = f"/meshcat/obstacles/{name}"
+        geometry = drawn[node]["object"]["geometries"][0]
+        local = surface_points(geometry)
+        world = local @ poses[node][:3, :3].T + poses[node][:3, 3]
+        sd = shape.signed_distance(world)
+        if name == "table":  # the slab: its top face on the plane, the rest below it
+            top = np.isclose(local[:, 2], 0.5 * geometry["depth"])
+            assert top.any() and np.abs(sd[top]).max() < 1e-6 and (sd[~top] < 1e-6).all()
+            assert np.abs(world[:, :2].mean(axis=0) - scene.sphere.center[:2]).max() < 0.2
+        else:
+            assert np.abs(sd).max() < 1e-4, name  # the shapes' smoothing: ε²/2r at most
+
+
+def test_a_plan_with_an_environment_draws_its_obstacles() -> None:
+    """Plan.preview draws the obstacles the plan keeps clear of; the object's bounding ball, a
+    modelling stand-in for the object's mesh, is left out."""
+    import optlight
+    from optlight.setup import Setup
+
+    setup = Setup.from_problem(reduced_problem("table_wall", camera_px=48, landmarks={"count": 3}))
+    assert setup.environment is not None
+    preview_plan = optlight.solve(setup)
+    paths = set(objects(scene_commands(preview_plan.preview().static_html())))
+    names = {o.name for o in setup.environment.obstacles} - {"object"}
+    assert {"table", "wall", "camera_body", "camera_stand"} <= names
+    assert {f"/meshcat/obstacles/{name}" for name in names} <= paths
+    assert "/meshcat/obstacles/object" not in paths
+
+
 def test_object_is_coloured_by_the_shading(commands, preview, plan):
     scene = plan[0]
     geometry = objects(commands)["/meshcat/object"]["object"]["geometries"][0]["data"]["attributes"]

@@ -24,6 +24,10 @@ What is drawn (node paths under ``/meshcat``, see the ``*_NODE`` constants):
 - ``path``: a line through the light positions of the planned path;
 - ``camera``: the camera body and its frustum (lines from the centre to the image corners, at the
   object's depth);
+- ``obstacles/<name>``: the environment's obstacles the plan keeps clear of (``obstacles``), grey and
+  half transparent, each as the exact shape the verification checks (a box, a cylinder, a ball; a
+  half-space, the table, as a slab :data:`TABLE_SIDE_M` wide and :data:`TABLE_THICKNESS_M` thick
+  whose top is its plane, centred under the object);
 - ``light``: the light frame (animated), a bulb at its origin and a cone along its +z axis.
 
 With a trajectory, an animation moves the robot's links and the light from the trajectory's start to
@@ -40,7 +44,7 @@ import base64
 import html
 import json
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Protocol
@@ -59,6 +63,7 @@ from pinocchio.visualize import MeshcatVisualizer
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from optlight.environment.shapes import Ball, Box, Cylinder, HalfSpace, Obstacle
 from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
 from optlight.scene.render import lambertian
@@ -75,6 +80,10 @@ LANDMARKS_NODE = "landmarks"
 PATH_NODE = "path"
 CAMERA_NODE = "camera"
 LIGHT_NODE = "light"
+OBSTACLES_NODE = "obstacles"
+#: Side and thickness (m) of the slab that shows a half-space obstacle (the table).
+TABLE_SIDE_M = 1.6
+TABLE_THICKNESS_M = 0.02
 
 #: Robots drawn with their collision meshes: meshcat renders their COLLADA visual meshes broken.
 _COLLISION_MESH_ROBOTS = re.compile(r"^ur\d+")
@@ -131,7 +140,8 @@ class Preview:
     timed ``trajectory`` (joint angles θ). Keywords: ``theta``, the joint angles shown without a
     trajectory (default: the trajectory's start, else the robot's reference configuration);
     ``light_position`` (m), where the light is for the object's shading (default: the light frame's
-    origin in the configuration shown); ``show_robot`` False leaves the robot's meshes out (the
+    origin in the configuration shown); ``obstacles``, the environment's shapes to draw;
+    ``show_robot`` False leaves the robot's meshes out (the
     light is still placed by its kinematics); ``fps``, the rate (frames/s) of the poses the
     animation's keyframes are chosen from.
     """
@@ -147,6 +157,7 @@ class Preview:
         *,
         theta: ArrayLike | None = None,
         light_position: ArrayLike | None = None,
+        obstacles: Sequence[Obstacle] = (),
         show_robot: bool = True,
         fps: float = 30.0,
     ) -> None:
@@ -193,6 +204,7 @@ class Preview:
         self._add_landmarks(vis, landmarks, costs)
         self._add_path(vis, np.asarray(path_positions, float).reshape(-1, 3))
         self._add_camera(vis)
+        self._add_obstacles(vis, obstacles)
         self._add_light(vis)
         self._set_view(vis, np.vstack([joint_positions, landmarks]))
         if trajectory is not None:
@@ -325,6 +337,14 @@ class Preview:
         pose[:3, :3], pose[:3, 3] = camera.rotation, camera.position - 0.9 * size * camera.rotation[:, 2]
         body.set_transform(pose)
 
+    def _add_obstacles(self, vis: meshcat.Visualizer, obstacles: Sequence[Obstacle]) -> None:
+        material = mg.MeshLambertMaterial(color=0x8A8F98, opacity=0.45, transparent=True, depthWrite=False)
+        for obstacle in obstacles:
+            geometry, pose = obstacle_display(obstacle, self.scene.sphere.center)
+            node = vis[f"{OBSTACLES_NODE}/{obstacle.name}"]
+            node.set_object(geometry, material)
+            node.set_transform(pose)
+
     def _add_light(self, vis: meshcat.Visualizer) -> None:
         size = 0.05 * self.scene.sphere.radius
         vis[f"{LIGHT_NODE}/bulb"].set_object(mg.Sphere(0.5 * size), mg.MeshBasicMaterial(color=_LIGHT_COLOR))
@@ -446,6 +466,33 @@ class _RobotView(MeshcatVisualizer):
             (self.getViewerNodeName(obj, pin.GeometryType.VISUAL), self.visual_data.oMg[k])
             for k, obj in enumerate(self.visual_model.geometryObjects)
         ]
+
+
+def obstacle_display(obstacle: Obstacle, center: ArrayLike) -> tuple[mg.Geometry, Array]:
+    """Meshcat geometry and world pose (4, 4) of an obstacle shape. Three.js cylinders run along
+    their y axis, ours along z: the pose turns y onto z. A half-space {x : nᵀx ≤ h} is a slab whose
+    top face is its plane, centred at the projection of ``center`` (m) onto it."""
+    pose = np.eye(4)
+    if isinstance(obstacle, Box):
+        pose[:3, :3], pose[:3, 3] = obstacle.rotation, obstacle.center
+        return mg.Box(2.0 * obstacle.half_extents), pose
+    if isinstance(obstacle, Cylinder):
+        y_to_z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+        pose[:3, :3], pose[:3, 3] = obstacle.rotation @ y_to_z, obstacle.center
+        return mg.Cylinder(2.0 * obstacle.half_length, obstacle.radius), pose
+    if isinstance(obstacle, Ball):
+        pose[:3, 3] = obstacle.center
+        return mg.Sphere(obstacle.radius), pose
+    if isinstance(obstacle, HalfSpace):
+        n = obstacle.normal / np.linalg.norm(obstacle.normal)
+        c = np.asarray(center, float)
+        on_plane = c - (n @ c - obstacle.offset) * n
+        x = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        x /= np.linalg.norm(x)
+        pose[:3, :3] = np.column_stack([x, np.cross(n, x), n])
+        pose[:3, 3] = on_plane - 0.5 * TABLE_THICKNESS_M * n
+        return mg.Box([TABLE_SIDE_M, TABLE_SIDE_M, TABLE_THICKNESS_M]), pose
+    raise TypeError(f"no display for the obstacle {obstacle.name!r} ({type(obstacle).__name__})")
 
 
 def animation_times(duration: float, fps: float) -> Array:
