@@ -303,7 +303,7 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark."""
+    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
     retreat = (
@@ -317,7 +317,13 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
         if spec.timing == "jerk_limited"
         else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
     )
-    return timed(spec.dwell_s, joint_names=setup.robot.joint_names, approach=approach, retreat=retreat)
+    return timed(
+        spec.dwell_s,
+        joint_names=setup.robot.joint_names,
+        approach=approach,
+        retreat=retreat,
+        position_bounds=(limits.lower, limits.upper),
+    )
 
 
 def verify_knots(

@@ -16,7 +16,7 @@ from optlight.planning.jerk import (
     jerk_limited_timing,
     rest_to_rest_duration,
 )
-from optlight.planning.timing import time_parameterize
+from optlight.planning.timing import chord_path, spline_position_range, time_parameterize
 
 VMAX = np.array([1.0, 1.5, 0.8])
 AMAX = np.array([3.0, 2.0, 4.0])
@@ -144,3 +144,72 @@ def test_bad_limits_are_named() -> None:
         jerk_limited_timing(bad, VMAX, AMAX, JMAX, 0.1)
     lone = jerk_limited_timing([np.ones((1, 3))], VMAX, AMAX, JMAX, 0.2)
     assert lone.duration == 0.2 and lone.capture_times.tolist() == [0.1]
+
+
+#: A segment of a camera-loop re-plan (Panda, rad, rounded to 0.1 mrad): joint 3 on the trajectory
+#: NLP's bound, 5 mrad inside its limit 2.8973, at two knots with the path turning on both sides;
+#: joint 4 on its bound at the other end.
+AT_THE_BOUND = np.array(
+    [
+        [0.0844, -1.6427, 2.4277, -2.7305, 0.0217, 1.9585, 0.7851],
+        [0.1804, -1.6075, 2.4868, -2.7867, 0.0781, 1.9626, 0.7851],
+        [0.2752, -1.5673, 2.5463, -2.8373, 0.1395, 1.9576, 0.7851],
+        [0.3686, -1.5226, 2.6052, -2.882, 0.2049, 1.9431, 0.7851],
+        [0.461, -1.474, 2.6624, -2.921, 0.2732, 1.9192, 0.7851],
+        [0.5529, -1.4222, 2.7167, -2.9544, 0.3429, 1.8858, 0.7851],
+        [0.6451, -1.3679, 2.7665, -2.9825, 0.4125, 1.8433, 0.7851],
+        [0.7382, -1.3117, 2.8105, -3.0058, 0.4805, 1.7922, 0.7851],
+        [0.8329, -1.254, 2.8471, -3.025, 0.5455, 1.7335, 0.7851],
+        [0.9297, -1.1952, 2.8748, -3.0405, 0.6061, 1.6682, 0.7851],
+        [1.0287, -1.1358, 2.8923, -3.053, 0.6613, 1.5979, 0.7851],
+        [1.2576, -1.0319, 2.8923, -3.0668, 0.7654, 1.4339, 0.7851],
+        [1.4162, -0.9944, 2.8685, -3.0668, 0.8219, 1.3235, 0.7851],
+        [1.5739, -0.9545, 2.8258, -3.0668, 0.8645, 1.2146, 0.7851],
+        [1.7292, -0.9128, 2.764, -3.0668, 0.8949, 1.1109, 0.7851],
+        [1.8795, -0.8671, 2.6821, -3.0668, 0.9145, 1.0166, 0.7851],
+        [2.0202, -0.8116, 2.5786, -3.0668, 0.9248, 0.9385, 0.7851],
+        [2.1425, -0.7342, 2.4539, -3.0668, 0.9285, 0.889, 0.7851],
+        [2.2282, -0.617, 2.3205, -3.0668, 0.9285, 0.8882, 0.7851],
+        [2.2864, -0.4797, 2.2028, -3.0631, 0.9291, 0.9243, 0.7851],
+    ]
+)
+#: The Panda's joint limits (rad), and its published velocity, acceleration and jerk limits.
+LOWER = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+UPPER = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+PANDA_V = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+PANDA_A = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
+PANDA_J = np.full(7, 7500.0)
+
+
+def test_spline_position_range_is_the_range_of_the_spline() -> None:
+    rng = np.random.default_rng(3)
+    w = np.cumsum(rng.normal(size=(12, 3)), axis=0)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+    low, high = spline_position_range(s, w)
+    spline = CubicSpline(s, w, bc_type="not-a-knot")
+    for i in range(len(s) - 1):
+        dense = spline(np.linspace(s[i], s[i + 1], 20001))
+        np.testing.assert_allclose(high[i], dense.max(axis=0), atol=1e-7)
+        np.testing.assert_allclose(low[i], dense.min(axis=0), atol=1e-7)
+
+
+def test_the_timed_path_keeps_the_joint_limits_where_its_spline_bulged() -> None:
+    """Through the waypoints alone the spline passes joint 3's limit (by 1 mrad with these rounded
+    knots, 6 mrad with the NLP's) between the two knots on the bound; with the position bounds the path gets chord midpoints there, keeps every waypoint,
+    and the timed trajectory, densely resampled, stays within the limit."""
+    w = AT_THE_BOUND
+    s, _ = chord_path(w)
+    assert spline_position_range(s, w)[1].max(axis=0)[2] > UPPER[2] + 1e-3
+    s2, w2 = chord_path(w, (LOWER, UPPER))
+    assert len(w2) > len(w) and all(np.isclose(w2, q).all(axis=1).any() for q in w)
+    low, high = spline_position_range(s2, w2)
+    assert (low >= LOWER).all() and (high <= UPPER).all()
+    for timed, limits in (
+        (jerk_limited_timing, (PANDA_V, PANDA_A, PANDA_J)),
+        (time_parameterize, (PANDA_V, PANDA_A)),
+    ):
+        trajectory = timed([w], *limits, 0.1, position_bounds=(LOWER, UPPER))
+        q = trajectory.sample(np.linspace(0.0, trajectory.duration, 40001))[0]
+        assert (q <= UPPER + 1e-9).all() and (q >= LOWER - 1e-9).all(), timed.__name__
+        unbounded = timed([w], *limits, 0.1)
+        assert unbounded.sample(np.linspace(0.0, unbounded.duration, 40001))[0][:, 2].max() > UPPER[2]

@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from optlight.errors import SolverError
-from optlight.planning.timing import Trajectory, assemble_trajectory, chord_path, positive_limits
+from optlight.planning.timing import Trajectory, as_bounds, assemble_trajectory, chord_path, positive_limits
 
 Array = NDArray[np.float64]
 
@@ -194,18 +194,20 @@ def jerk_limited_timing(
     joint_names: Sequence[str] | None = None,
     approach: ArrayLike | None = None,
     retreat: ArrayLike | None = None,
+    position_bounds: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> Trajectory:
     """Time the path through the landmarks with continuous acceleration: rest at every landmark for
     ``dwell_s`` (s), and move along each segment by the jerk-limited profile of the module docstring,
     so that |q̇_j| ≤ velocity_limit_j, |q̈_j| ≤ acceleration_limit_j and |q⃛_j| ≤ jerk_limit_j
-    everywhere (rad/s, rad/s², rad/s³). ``segments``, ``approach`` and ``retreat`` as for
-    :func:`optlight.planning.timing.time_parameterize`.
+    everywhere (rad/s, rad/s², rad/s³). ``segments``, ``approach``, ``retreat`` and
+    ``position_bounds`` as for :func:`optlight.planning.timing.time_parameterize`.
 
     Raises ValueError for bad inputs and :class:`SolverError` when ruckig fails on a segment.
     """
+    joint_bounds = None if position_bounds is None else as_bounds(position_bounds)
 
     def segment(index: int, waypoints: Array, n: int) -> JerkLimitedMotion | None:
-        chord = chord_path(waypoints)
+        chord = chord_path(waypoints, joint_bounds)
         if chord is None:
             return None
         s, w = chord

@@ -12,8 +12,11 @@ landmark i+1, consecutive segments sharing their end and start point. The robot
 
 Geometric path of a segment: the cubic spline q(s) (not-a-knot) through the waypoints q_k, over the
 cumulative chord parameter s_0 = 0, s_k = s_{k-1} + |q_k − q_{k-1}|₂ (rad). The spline interpolates
-the waypoints but may bulge slightly beyond them between knots; nothing here knows the joint position
-limits, so :func:`optlight.verify.verify_trajectory` is what checks them.
+the waypoints but may bulge beyond them between knots: two consecutive waypoints on the trajectory
+NLP's bound, 5 mrad inside a joint limit, with the path turning on both sides, bulged 6 mrad past the
+limit (a re-plan of the camera loop). Given the joint ``position_bounds``, the path gets more
+waypoints where its spline leaves them (:func:`chord_path`); :func:`optlight.verify.verify_trajectory`
+checks the limits again, independently.
 
 Timing of a segment: TOPPRA (reachability analysis, seidel solver) maximises the path speed ṡ subject
 to |q'(s) ṡ| ≤ v_max and |q''(s) ṡ² + q'(s) s̈| ≤ a_max at the gridpoints s_0 < … < s_N, with
@@ -58,6 +61,9 @@ MAX_REFINEMENTS = 6
 #: Waypoints closer than this (rad, Euclidean in joint space) are merged; a segment whose waypoints
 #: all coincide has no motion.
 MERGE_DISTANCE = 1e-9
+#: Largest number of times the waypoints of a segment are refined where its spline leaves the joint
+#: position bounds (:func:`chord_path`).
+MAX_BULGE_REFINEMENTS = 8
 #: Largest gap (rad, any joint) allowed between the end of a segment and the start of the next.
 JOINT_TOLERANCE = 1e-9
 
@@ -488,6 +494,7 @@ def time_parameterize(
     joint_names: Sequence[str] | None = None,
     approach: ArrayLike | None = None,
     retreat: ArrayLike | None = None,
+    position_bounds: tuple[ArrayLike, ArrayLike] | None = None,
 ) -> Trajectory:
     """Time the path through the landmarks: rest at every landmark for ``dwell_s`` (s), and move
     along each segment time-optimally under |q̇_j| ≤ velocity_limit_j (rad/s) and
@@ -507,16 +514,20 @@ def time_parameterize(
         approach, retreat: (K ≥ 2, n) joint waypoints from the start configuration to the first
             landmark and from the last landmark back, timed like the segments (rest to rest) before
             the first dwell and after the last; None: the trajectory starts (ends) at that dwell.
+        position_bounds: (lower, upper) joint limits (rad, each (n,)) the spline of each segment is
+            kept within (:func:`chord_path`); None: the waypoints alone.
 
     Raises:
         ValueError: inconsistent shapes, non-finite values, segments that do not join, bad limits.
         SolverError: TOPPRA failed on a segment (its index and TOPPRA's return code are named), or
             the limits could not be kept between gridpoints after refinement.
     """
+    joint_bounds = None if position_bounds is None else as_bounds(position_bounds)
+
     def segment(index: int, waypoints: Array, n: int) -> _Piece | None:
         vmax = positive_limits(velocity_limit, n, "velocity_limit")
         amax = positive_limits(acceleration_limit, n, "acceleration_limit")
-        return _time_segment(index, waypoints, vmax, amax, gridpoints)
+        return _time_segment(index, waypoints, vmax, amax, gridpoints, joint_bounds)
 
     if gridpoints is not None and gridpoints < 2:
         raise ValueError(f"gridpoints must be at least 2, got {gridpoints}")
@@ -619,9 +630,17 @@ def positive_limits(value: ArrayLike, n: int, name: str) -> Array:
     return np.broadcast_to(lim, (n,)).copy()
 
 
-def chord_path(waypoints: Array) -> tuple[Array, Array] | None:
+def chord_path(
+    waypoints: Array, position_bounds: tuple[Array, Array] | None = None
+) -> tuple[Array, Array] | None:
     """Waypoints with near-duplicates merged and their cumulative chord parameter s (rad), or None
-    when all waypoints coincide. The last waypoint is kept exactly."""
+    when all waypoints coincide. The last waypoint is kept exactly.
+
+    With ``position_bounds`` (lower, upper), each (n,) rad: where the not-a-knot cubic spline through
+    the waypoints leaves the bounds between two waypoints, the midpoint of the joint-space chord
+    between them (inside the bounds when both are) becomes a waypoint too, and the spline is fitted
+    again, at most :data:`MAX_BULGE_REFINEMENTS` times; every waypoint given is kept. Halving an
+    interval shrinks its bulge about fourfold (the bulge of a cubic interpolant grows as h²)."""
     kept = [waypoints[0]]
     for q in waypoints[1:]:
         if np.linalg.norm(q - kept[-1]) > MERGE_DISTANCE:
@@ -630,12 +649,61 @@ def chord_path(waypoints: Array) -> tuple[Array, Array] | None:
         return None
     kept[-1] = waypoints[-1]
     w = np.array(kept)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
-    return s, w
+    if position_bounds is not None:
+        w = _within_bounds(w, *position_bounds)
+    return _chord(w), w
+
+
+def _within_bounds(w: Array, lower: Array, upper: Array) -> Array:
+    """The waypoints ``w`` (K, n) with the chord midpoints :func:`chord_path` adds where the spline
+    through them leaves [``lower``, ``upper``]."""
+    for _ in range(MAX_BULGE_REFINEMENTS):
+        low, high = spline_position_range(_chord(w), w)
+        outside = np.flatnonzero(((low < lower) | (high > upper)).any(axis=1))
+        if outside.size == 0:
+            break
+        w = np.insert(w, outside + 1, 0.5 * (w[outside] + w[outside + 1]), axis=0)
+    return w
+
+
+def _chord(w: Array) -> Array:
+    """The cumulative chord parameter (K,) of waypoints (K, n): s_0 = 0, s_k = s_{k−1} + |q_k − q_{k−1}|₂."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+
+
+def spline_position_range(s: Array, w: Array) -> tuple[Array, Array]:
+    """(lowest, highest), each (K − 1, n): the exact range of each joint of the not-a-knot cubic
+    spline through waypoints ``w`` (K, n) at ``s`` (K,) on each interval: the cubic's values at the
+    interval's ends and where its derivative, a quadratic, vanishes inside."""
+    from scipy.interpolate import CubicSpline
+
+    c = np.asarray(CubicSpline(s, w, bc_type="not-a-knot").c, float)  # q = c0 τ³ + c1 τ² + c2 τ + c3
+    h = np.diff(s)[:, None]
+    qa, qb, qc = 3 * c[0], 2 * c[1], c[2]  # q′ = qa τ² + qb τ + qc
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(qb**2 - 4 * qa * qc)
+        quadratic = [(-qb + root) / (2 * qa), (-qb - root) / (2 * qa)]
+        linear = -qc / qb
+    candidates = [np.zeros_like(c[0]), np.broadcast_to(h, c[0].shape)]
+    for tau in (*quadratic, linear):
+        valid = np.isfinite(tau) & (tau > 0) & (tau < h)
+        candidates.append(np.where(valid, tau, 0.0))
+    values = np.stack([((c[0] * t + c[1]) * t + c[2]) * t + c[3] for t in candidates])
+    return values.min(axis=0), values.max(axis=0)
+
+
+def as_bounds(position_bounds: tuple[ArrayLike, ArrayLike]) -> tuple[Array, Array]:
+    """``position_bounds`` (lower, upper) as two float arrays."""
+    return np.asarray(position_bounds[0], float), np.asarray(position_bounds[1], float)
 
 
 def _time_segment(
-    index: int, waypoints: Array, vmax: Array, amax: Array, gridpoints: int | None
+    index: int,
+    waypoints: Array,
+    vmax: Array,
+    amax: Array,
+    gridpoints: int | None,
+    position_bounds: tuple[Array, Array] | None = None,
 ) -> _Motion | None:
     """TOPPRA on one segment, rest to rest, with the grid refined until the limits hold between
     gridpoints (module docstring); None for a segment without motion."""
@@ -645,7 +713,7 @@ def _time_segment(
     import toppra.constraint
     from toppra.interpolator import propose_gridpoints
 
-    chord = chord_path(waypoints)
+    chord = chord_path(waypoints, position_bounds)
     if chord is None:
         return None
     s, w = chord
