@@ -162,6 +162,7 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
 
 def _cmd_acquire(args: argparse.Namespace) -> int:
     from rich.console import Console
+    from rich.markup import escape
 
     from optlight.acquisition import acquire
     from optlight.export import check_output_folder
@@ -196,8 +197,8 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
         )
     best = acquisition.best
-    console.print(
-        f"{acquisition.status}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
+    console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
+        f"{escape(acquisition.status)}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
         f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
     )
     with console.status(f"writing {out}/"):

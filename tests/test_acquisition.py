@@ -264,6 +264,19 @@ def test_cli_acquire(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert len(err) == 1 and "captures.csv" in err[0]
 
 
+def test_cli_acquire_prints_a_failed_replan_as_it_is(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, mismatched: Acquisition
+) -> None:
+    """A re-plan's failure names problem-file sections ("[landmarks] allow_partial"): printed as
+    text, not taken for rich's markup (which swallowed them)."""
+    status = "re-plan failed (landmark 4 is out of reach; set [landmarks] allow_partial = true)"
+    monkeypatch.setattr(
+        "optlight.acquisition.acquire", lambda *args, **kwargs: dataclasses.replace(mismatched, status=status)
+    )
+    assert cli.main(["acquire", "default", "--camera", "model", "--out", str(tmp_path / "out")]) == 0
+    assert status in " ".join(capsys.readouterr().out.split())  # rich wraps the line at the terminal's width
+
+
 @pytest.mark.parametrize(
     ("costs", "kept"),
     [
