@@ -316,3 +316,35 @@ def test_captures_keep_the_margins_where_they_can_and_the_rows_where_they_cannot
     assert unkeepable.min_clearance_m < 10.0
     # the same light (the roll, the last joint, is free: the solves end at different rolls)
     np.testing.assert_allclose(unkeepable.position, relaxed.position, atol=1e-6)
+
+
+def test_a_landmark_out_of_reach_is_placed_from_a_clear_posture_found_along_its_azimuth() -> None:
+    """The lights of a camera-loop re-plan (default layout, 96² camera): landmark 4 at zenith 60°,
+    azimuth 180° is out of reach, and the placement NLP finds its azimuth infeasible from the IK's
+    unconverged angles and from the previous capture's (the code before this stop raised here).
+    Scanning the azimuth with the reacher gives it a clear start: the landmark is placed on its
+    azimuth, its posture holding the light there (pinocchio) clear of every row."""
+    from optlight.planning.landmarks import Landmark
+
+    problem = reduced_problem(
+        camera_px=96,
+        landmarks={"count": 8, "resolution": 48},
+        objective={"reference": {"kind": "light", "zenith_deg": 35.0, "azimuth_deg": 120.0}},
+    )
+    setup = Setup.from_problem(problem)
+    sphere = setup.sphere
+    zeniths = np.deg2rad([60.0, 60.0, 58.1, 40.4, 60.0, 60.0, 54.5, 60.0])
+    azimuths = np.deg2rad(45.0 * np.arange(8))
+    landmarks = [
+        Landmark(i, z, a, sphere.position(z, a), 0.01, "refined", "", 0, 0.0)
+        for i, (z, a) in enumerate(zip(zeniths, azimuths, strict=True))
+    ]
+    placed = place_landmarks(setup, landmarks)
+    assert [lm.index for lm in placed.landmarks] == list(range(8))
+    fourth = placed.landmarks[4]
+    assert fourth.status == "placed" and fourth.azimuth == pytest.approx(np.pi)
+    assert any(note.startswith("landmark 4 (azimuth 180.0°)") for note in placed.warnings)
+    position = setup.robot.light_pose(placed.thetas[4])[0]
+    np.testing.assert_allclose(position, sphere.position(fourth.zenith, fourth.azimuth), atol=1e-6)
+    assert setup.environment is not None
+    assert setup.environment.worst_sphere_row(setup.robot, placed.thetas[4])[0] >= 0.0

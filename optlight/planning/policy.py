@@ -21,7 +21,7 @@ pipeline, and the trajectory NLP's warm start). Angles in radians, lengths in me
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK
 from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
-from optlight.planning.landmarks import Landmark
+from optlight.planning.landmarks import Landmark, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
 from optlight.robot import IKResult, generalized_ik
@@ -187,11 +187,23 @@ def too_close_mm(clearance: float) -> float:
     return (CAPTURE_SLACK - clearance) * 1e3
 
 
+#: Zenith spacing (rad, 5°) of the lights on a landmark's azimuth the reacher tries when the
+#: placement NLP fails from every start (:class:`AzimuthPlacement`).
+SCAN_STEP = math.radians(5.0)
+
+
 class AzimuthPlacement:
     """The default :data:`Replacement`: the placement NLP on the landmark's azimuth, from the best
-    attempt's IK angles, then from the other's, then from the previous capture's; when it succeeds the landmark is replaced by the best
-    light the robot reaches clear on that azimuth, kept off the singular reach boundary (status
-    "placed", its cost)."""
+    attempt's IK angles, then from the other's, then from the previous capture's; when it succeeds the
+    landmark is replaced by the best light the robot reaches clear on that azimuth, kept off the
+    singular reach boundary (status "placed", its cost).
+
+    When it fails from all three, the lights on the azimuth :data:`SCAN_STEP` apart, nearest the
+    landmark's zenith first, are tried by the reacher from the previous capture's angles, and the
+    NLP starts again from the first clear posture found. Found through the camera loop: a re-plan
+    moved a landmark from zenith 53.6°, where the robot had reached it clear, to 60°, out of reach;
+    the NLP from the IK's unconverged angles and from the previous capture's found the azimuth
+    infeasible."""
 
     def __init__(self, setup: Setup, reacher: Reacher) -> None:
         self.setup = setup
@@ -210,6 +222,11 @@ class AzimuthPlacement:
                 break
             other = placement.solve(lm.azimuth, start)
             placed = other if other.success else placed
+        if not placed.success:
+            for theta in self._clear_on_azimuth(lm, previous):
+                placed = placement.solve(lm.azimuth, theta)
+                if placed.success:
+                    break
         sphere = self.setup.sphere
         if not placed.success:
             clear_of = " clear of the environment" if self.setup.environment is not None else ""
@@ -237,6 +254,16 @@ class AzimuthPlacement:
         )
         note = f"{how} {why_moved(self.setup, attempts[0])} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
         return moved, placed.theta, note
+
+    def _clear_on_azimuth(self, lm: Landmark, previous: Array) -> Iterator[Array]:
+        """Clear joint angles holding a light on ``lm``'s azimuth (the reacher from ``previous``,
+        no restarts), at the allowed zeniths :data:`SCAN_STEP` apart, nearest ``lm.zenith`` first."""
+        sphere = self.setup.sphere
+        zeniths = zenith_grid(sphere, SCAN_STEP)
+        for zenith in zeniths[np.argsort(np.abs(zeniths - lm.zenith), kind="stable")]:
+            found = self.reacher.attempt(sphere.position(zenith, lm.azimuth), previous, restarts=False).theta
+            if found is not None:
+                yield found
 
 
 #: A posture further than this (rad, largest joint) from the next landmark's is searched again from it.
