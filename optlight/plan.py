@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
+from optlight.environment import OBJECT
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
@@ -135,7 +136,7 @@ class Plan:
             self.robot.light_positions(self.nlp.theta),  # the knots, off the sphere on the transfers
             self.trajectory,
             light_position=self.visited[0].position,
-            obstacles=[o for o in obstacles if o.name != "object"],
+            obstacles=[o for o in obstacles if o.name != OBJECT],
         )
 
     def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:

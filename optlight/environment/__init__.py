@@ -66,6 +66,7 @@ Array = NDArray[np.float64]
 
 __all__ = [
     "LIGHT",
+    "OBJECT",
     "VIEW_CONE",
     "Ball",
     "Box",
@@ -92,7 +93,10 @@ __all__ = [
 #: touching the view cone).
 CAPTURE_SLACK = 0.002
 
-RESERVED_NAMES = ("object", "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE)
+#: Name of the obstacle that stands for the object: its bounding sphere (the object's mesh is drawn).
+OBJECT = "object"
+
+RESERVED_NAMES = (OBJECT, "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE)
 
 
 def listed_obstacles(spec: EnvironmentSpec) -> list[tuple[str, Obstacle]]:
@@ -209,7 +213,7 @@ class Environment:
         else:
             vertices = build_object(problem).mesh.vertices if object_vertices is None else object_vertices
             radius = float(np.max(np.linalg.norm(np.asarray(vertices, float) - center, axis=1)))
-        obstacles: list[Obstacle] = [Ball("object", center, radius)]
+        obstacles: list[Obstacle] = [Ball(OBJECT, center, radius)]
         if spec.table_height_m is not None:
             obstacles.append(HalfSpace("table", np.array([0.0, 0.0, 1.0]), float(spec.table_height_m)))
         camera = Camera.from_spec(problem.camera, center)
