@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 
 from optlight import ProblemError, load_problem
 from optlight.scene import Scene
-from optlight.scene.gbuffer import intersector
+from optlight.scene.gbuffer import RayCaster
 from optlight.scene.objects import face_mesh
 from optlight.spec import FaceSpec, Problem, problem_from_dict
 
@@ -134,11 +134,38 @@ def test_face_renders_mirror_symmetric(default_scene: Scene) -> None:
 
 
 def test_rays_are_cast_with_embree(default_scene: Scene) -> None:
-    caster = intersector(default_scene.mesh)
-    assert type(caster).__module__ == "trimesh.ray.ray_pyembree"
-    import embreex  # noqa: F401 - the backend must be importable, not only the wrapper
+    assert isinstance(default_scene._caster, RayCaster)
+    assert type(default_scene._caster._scene).__module__ == "embreex.rtcore_scene"
 
-    assert type(default_scene._caster).__module__ == "trimesh.ray.ray_pyembree"
+
+def _rays_at_the_face(scene: Scene, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """n rays from points on a sphere round the face towards points in a box round it: hits and misses."""
+    rng = np.random.default_rng(seed)
+    center = scene.sphere.center
+    u = rng.normal(size=(n, 3))
+    origins = center + 0.3 * u / np.linalg.norm(u, axis=1, keepdims=True)
+    targets = center + rng.uniform(-0.2, 0.2, size=(n, 3))
+    d = targets - origins
+    return origins, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def test_ray_caster_agrees_with_trimesh_and_with_itself_on_any_thread_count(
+    default_scene: Scene, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Our Embree wrapper against trimesh's (an independent wrapper of the same library), and split
+    over two threads against one."""
+    from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+    origins, directions = _rays_at_the_face(default_scene, 40_000, seed=3)
+    caster = RayCaster(default_scene.mesh)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    serial = caster.first_hits(origins, directions)
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    threaded = caster.first_hits(origins, directions)
+    reference = RayMeshIntersector(default_scene.mesh).intersects_first(origins, directions)
+    assert 0.3 < np.mean(serial >= 0) < 0.99  # both hits and misses are tested
+    np.testing.assert_array_equal(threaded, serial)
+    np.testing.assert_array_equal(serial, reference)
 
 
 def test_gbuffer_points_lie_on_pixel_rays_and_surface(default_scene: Scene) -> None:

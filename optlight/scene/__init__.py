@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
-from optlight.scene.gbuffer import GBuffer, build_gbuffer, intersector, shadow_visibility
+from optlight.scene.gbuffer import GBuffer, RayCaster, build_gbuffer, shadow_visibility
 from optlight.scene.luminance import luminance_function
 from optlight.scene.objects import SceneObject, build_object
 from optlight.scene.render import shade, to_image
@@ -46,9 +46,9 @@ class Scene:
     vertex, ``light`` (:class:`LightSpec`), ``gbuffer`` (:class:`GBuffer`).
     """
 
-    def __init__(self, problem: Problem, camera: Camera, obj: SceneObject, caster: Any = None) -> None:
+    def __init__(self, problem: Problem, camera: Camera, obj: SceneObject, caster: RayCaster | None = None) -> None:
         """Check that the object lies inside the light sphere, then cast the primary rays
-        (``caster``: the object's ray intersector when already built, e.g. by another resolution).
+        (``caster``: the object's ray caster when already built, e.g. by another resolution).
 
         Raises :class:`ProblemError` with key ``light_sphere.radius_m`` when a vertex is at b or
         farther from O (the light could not circle the object), and key ``camera`` when no pixel
@@ -71,7 +71,7 @@ class Scene:
                 "object point from object.center_m)",
                 self.sphere.radius,
             )
-        self._caster = caster if caster is not None else intersector(obj.mesh)
+        self._caster = caster if caster is not None else RayCaster(obj.mesh)
         self.gbuffer: GBuffer = build_gbuffer(camera, obj, self._caster)
         if self.gbuffer.size == 0:
             raise ProblemError(
@@ -106,7 +106,7 @@ class Scene:
         return scene if width is None and height is None else scene.resampled(width, height)
 
     def resampled(self, width: int | None = None, height: int | None = None) -> Scene:
-        """The same view and object at another image size; the object and its ray intersector are
+        """The same view and object at another image size; the object and its ray caster are
         shared, only the primary rays are cast again.
 
         fx, fy scale by W'/W, H'/H and the principal point by c' = (c + ½)·W'/W − ½ (pixel centres

@@ -1,0 +1,41 @@
+"""Work split over the cores this process may use, for the few loops whose library code releases
+the GIL: Embree's ray queries and NumPy's element-wise kernels on large arrays.
+
+The thread count follows ``OMP_NUM_THREADS`` when it is set, the convention of numerical libraries:
+Dask's workers set it to 1 (one single-threaded process per core, :mod:`optlight.batch`), so a
+batch is never oversubscribed. Otherwise it is the number of cores the process may run on.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+
+
+def thread_count() -> int:
+    """Threads to split work over: ``OMP_NUM_THREADS`` when it is a positive integer, else the
+    number of cores this process may run on."""
+    value = os.environ.get("OMP_NUM_THREADS", "")
+    if value.isdigit() and int(value) > 0:
+        return int(value)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def map_slices(work: Callable[[slice], T], size: int, min_size: int) -> list[T]:
+    """``work`` on consecutive slices of ``range(size)``, each at least ``min_size`` long (one slice,
+    in the calling thread, when ``size < 2 min_size`` or :func:`thread_count` is 1), in order.
+
+    ``work`` must release the GIL for the split to pay, and must not depend on another slice's
+    result. Results come back in slice order: concatenated, they are the same array whatever the
+    thread count."""
+    parts = max(1, min(thread_count(), size // max(1, min_size)))
+    if parts == 1:
+        return [work(slice(0, size))]
+    bounds = [size * k // parts for k in range(parts + 1)]
+    slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    with ThreadPoolExecutor(parts) as pool:
+        return list(pool.map(work, slices))
