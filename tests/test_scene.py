@@ -168,6 +168,16 @@ def test_ray_caster_agrees_with_trimesh_and_with_itself_on_any_thread_count(
     np.testing.assert_array_equal(serial, reference)
 
 
+def test_a_pickled_scene_casts_the_same_shadows(default_scene: Scene) -> None:
+    import pickle
+
+    light = default_scene.sphere.position(0.6, 2.0)
+    copy = pickle.loads(pickle.dumps(default_scene))
+    shadows = default_scene.visibility(light)
+    assert (shadows == 0).sum() > 100  # the light casts shadows worth comparing
+    np.testing.assert_array_equal(copy.visibility(light), shadows)
+
+
 def test_gbuffer_points_lie_on_pixel_rays_and_surface(default_scene: Scene) -> None:
     gb, cam = default_scene.gbuffer, default_scene.camera
     assert (

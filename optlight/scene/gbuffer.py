@@ -64,6 +64,15 @@ class RayCaster:
     """
 
     def __init__(self, mesh: Trimesh) -> None:
+        self._build(mesh)
+
+    def __getstate__(self) -> dict[str, Trimesh]:
+        return {"mesh": self.mesh}  # Embree's scene does not pickle: it is built again
+
+    def __setstate__(self, state: dict[str, Trimesh]) -> None:
+        self._build(state["mesh"])
+
+    def _build(self, mesh: Trimesh) -> None:
         self.mesh = mesh
         vertices = np.asarray(mesh.vertices, float)
         self._origin = vertices.min(axis=0)
