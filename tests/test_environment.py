@@ -254,14 +254,15 @@ def test_a_configuration_through_the_table_is_caught(env, robot, clear_theta, ta
 def test_skipped_samples_never_hide_a_violation_or_a_near_minimum(
     env, robot, clear_theta, table_theta
 ) -> None:
-    """The certified skipping of check() against every pair at every sample."""
+    """The certified skipping of check() against every pair at every sample: a hold of 700 samples
+    (certified in blocks, nothing due) and then the move into the table (due at every sample)."""
     s = np.linspace(0.0, 1.0, 61)[:, None]
-    thetas = (1 - s) * clear_theta + s * table_theta
+    thetas = np.vstack([np.repeat(clear_theta[None], 700, axis=0), (1 - s) * clear_theta + s * table_theta])
     times = np.arange(len(thetas)) * 0.01
     report = env.check(robot, thetas, times)
     cm = env.collision_model(robot)
     brute: dict[tuple[str, str], list[float]] = {}
-    for th in thetas:
+    for th in thetas[699:]:
         pin.updateGeometryPlacements(robot.model, robot.data, cm.geometry, cm.geometry_data, robot.to_pin(th))
         per: dict[tuple[str, str], float] = {}
         for pair in cm.pairs:
@@ -270,8 +271,8 @@ def test_skipped_samples_never_hide_a_violation_or_a_near_minimum(
             key = (pair.first_body, pair.second_name)
             per[key] = min(per.get(key, np.inf), cm.distance(pair.first, pair.second))
         for key, d in per.items():
-            brute.setdefault(key, []).append(d)
-    assert report.evaluations < len(thetas) * sum(p.kind != "view" for p in cm.pairs)
+            brute.setdefault(key, []).extend([d] * (700 if not brute.get(key) else 1))  # the hold: one value
+    assert report.evaluations < 61 * sum(p.kind != "view" for p in cm.pairs)
     for pc in report.pairs:
         if pc.kind == "view":
             continue

@@ -44,6 +44,8 @@ EXACT_BAND_M = 0.05
 MAX_EPISODES = 5
 #: Capture times match samples within this tolerance (s).
 TIME_TOLERANCE_S = 1e-9
+#: Most samples certified at once between evaluations (:func:`check_configurations`).
+_CERTIFY_BLOCK = 256
 
 
 @dataclass(frozen=True)
@@ -208,12 +210,22 @@ def check_configurations(
     req = coal.DistanceRequest()
     objects = geom.geometryObjects
 
-    for k in range(t.size):
-        active = ~is_view | capture[k]
-        certified = last_d - np.einsum("pn,pn->p", pair_weights, np.abs(theta[k] - last_theta))
-        todo = np.flatnonzero(active & (certified < np.maximum(threshold, np.minimum(best, trigger_band))))
-        if todo.size == 0:
+    k, size = 0, 1
+    while k < t.size:
+        # The next sample with a pair due. The certificates change only where a pair is evaluated,
+        # so the samples up to the next evaluation can be certified at once: a block, doubled while
+        # nothing is due (long clear stretches), back to one sample after an evaluation (a pair
+        # tracked exactly is due at every sample). The same samples are evaluated as one by one.
+        block = slice(k, min(k + size, t.size))
+        certified = last_d - np.einsum("pn,bpn->bp", pair_weights, np.abs(theta[block, None] - last_theta))
+        active = ~is_view | capture[block, None]
+        due = active & (certified < np.maximum(threshold, np.minimum(best, trigger_band)))
+        rows = np.flatnonzero(due.any(axis=1))
+        if rows.size == 0:
+            k, size = block.stop, min(2 * size, _CERTIFY_BLOCK)
             continue
+        k, size = k + int(rows[0]), 1
+        todo = np.flatnonzero(due[rows[0]])
         pin.updateGeometryPlacements(robot.model, robot.data, geom, gdata, robot.to_pin(theta[k]))
         for p in todo:
             a, b = int(first[p]), int(second[p])
@@ -232,6 +244,7 @@ def check_configurations(
                 best[p], best_k[p] = d, k
             if d < threshold[p]:
                 failing[p].append((k, d, np.asarray(res.getNearestPoint1(), float).copy()))
+        k += 1
 
     report_pairs, violations = _aggregate(model, t, best, best_k, evaluations, failing)
     return EnvironmentReport(
