@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
+from numpy.typing import ArrayLike, NDArray
 from trimesh import Trimesh
 
 from optlight.scene.camera import Camera
@@ -98,7 +98,7 @@ class RayCaster:
         return np.concatenate(parts)
 
 
-def _plane_distance(mesh: Trimesh, triangles: NDArray[np.int64], origins: Array, directions: Array) -> Array:
+def _plane_distance(mesh: Trimesh, triangles: NDArray[np.integer], origins: Array, directions: Array) -> Array:
     """Ray parameter t of the hit with each ray's triangle plane; inf where the ray grazes it."""
     normals = mesh.face_normals[triangles]
     denom = np.einsum("ij,ij->i", directions, normals)
