@@ -23,7 +23,7 @@ PACKAGE = ROOT / "optlight"
 #: Where the light goes (objectives, landmarks) and how the robot gets there (policy, path,
 #: trajectory NLP, timing) both live in planning, above the built setup and below verification.
 LAYERS: list[set[str]] = [
-    {"errors", "jsondata", "interrupts", "cache"},
+    {"errors", "jsondata", "interrupts", "cache", "threads"},
     {"spec"},
     {"geometry"},
     {"scene", "robot"},
