@@ -197,6 +197,7 @@ class Environment:
         self.collisions = bool(collisions)
         self._models: dict[int, CollisionModel] = {}
         self._functions: dict[tuple[int, str], tuple[Robot, ca.Function]] = {}
+        self._rows_sx: dict[int, tuple[Robot, ca.SX, list[ca.SX]]] = {}
 
     @classmethod
     def from_problem(cls, problem: Problem, object_vertices: ArrayLike | None = None) -> Environment:
@@ -241,7 +242,10 @@ class Environment:
             cone = ViewCone.around(camera.position, center, radius, math.radians(view.margin_deg))
         light = problem.light
         if light.housing == "cylinder":
-            housing, offset = coal.Cylinder(light.housing_radius_m, light.housing_length_m), 0.5 * light.housing_length_m
+            housing, offset = (
+                coal.Cylinder(light.housing_radius_m, light.housing_length_m),
+                0.5 * light.housing_length_m,
+            )
         else:
             housing, offset = coal.Sphere(light.housing_radius_m), light.housing_radius_m
         return cls(
@@ -320,21 +324,32 @@ class Environment:
         return self._cached(robot, name, lambda: self._build_clearance(robot, rows))
 
     def _build_clearance(self, robot: Robot, selected: Sequence[int] | None) -> ca.Function:
-        cm = self.collision_model(robot)
-        theta = ca.SX.sym("theta", robot.n)
-        centers = self._symbolic_centers(robot, cm.spheres, theta)
-        r = cm.spheres.radii
-        rows = [
-            self.obstacles[o].signed_distance_sx(centers[s]) - r[s] - self.margin for s, o in cm.obstacle_rows
-        ]
-        rows += [
-            ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - self.self_margin
-            for s, t in cm.self_rows
-        ]
+        theta, rows = self._clearance_rows_sx(robot)
         if selected is not None:
             rows = [rows[i] for i in selected]
         out = ca.vertcat(*rows) if rows else ca.SX(0, 1)
         return ca.Function("clearance", [theta], [out], ["theta"], ["clearance"], {"cse": True})
+
+    def _clearance_rows_sx(self, robot: Robot) -> tuple[ca.SX, list[ca.SX]]:
+        """θ and every clearance row as an SX expression of it, built once per robot: each NLP window
+        selects its own rows (:meth:`near_rows`), and the kinematics of the spheres were most of the
+        time of building a selection's function."""
+        key = id(robot)
+        if key not in self._rows_sx or self._rows_sx[key][0] is not robot:
+            cm = self.collision_model(robot)
+            theta = ca.SX.sym("theta", robot.n)
+            centers = self._symbolic_centers(robot, cm.spheres, theta)
+            r = cm.spheres.radii
+            rows = [
+                self.obstacles[o].signed_distance_sx(centers[s]) - r[s] - self.margin
+                for s, o in cm.obstacle_rows
+            ]
+            rows += [
+                ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - self.self_margin
+                for s, t in cm.self_rows
+            ]
+            self._rows_sx[key] = (robot, theta, rows)
+        return self._rows_sx[key][1], self._rows_sx[key][2]
 
     def near_rows(self, robot: Robot, thetas: ArrayLike, distance: float) -> tuple[int, ...]:
         """The clearance rows (indices into :meth:`clearance_function`'s) below ``distance`` (m) at
@@ -381,10 +396,14 @@ class Environment:
         sp = cm.spheres
         c = sp.world_centers(robot.model, robot.data, robot.to_pin(theta))
         r = sp.radii
-        obs = [self.obstacles[o].signed_distance(c[s])[0] - r[s] - self.margin for s, o in cm.obstacle_rows]
+        obs = np.empty(len(cm.obstacle_rows))
+        for o in np.unique(cm.obstacle_rows[:, 1]):  # one call per obstacle, over all its spheres
+            rows = np.flatnonzero(cm.obstacle_rows[:, 1] == o)
+            spheres = cm.obstacle_rows[rows, 0]
+            obs[rows] = self.obstacles[o].signed_distance(c[spheres]) - r[spheres] - self.margin
         d = c[cm.self_rows[:, 0]] - c[cm.self_rows[:, 1]]
         own = np.sqrt(np.sum(d * d, axis=1) + SMOOTHING_M**2) - r[cm.self_rows].sum(axis=1) - self.self_margin
-        clearance = np.concatenate([np.asarray(obs, float), own])
+        clearance = np.concatenate([obs, own])
         view = (
             self.view_cone.signed_distance(c[cm.view_rows]) - r[cm.view_rows]
             if self.view_cone is not None
