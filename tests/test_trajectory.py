@@ -297,3 +297,51 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
     with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
         trajectory.optimize_knots(free, path, missed)
     assert barriers == [None]
+
+
+def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
+    """Our Hessian of the Lagrangian (knot by knot, :func:`optlight.planning.nlp.knot_hessian`)
+    against the one CasADi derives from the whole NLP, at random points and multipliers: the
+    trajectory NLP with clearance and view rows (arc rows, a fixed start, a knot off the sphere) and
+    the transfer NLP."""
+    from conftest import reduced_problem
+
+    from optlight.planning import trajectory
+    from optlight.planning.nlp import environment_rows
+
+    setup = Setup.from_problem(reduced_problem("table_wall"))
+    env, robot = setup.environment, setup.robot
+    captured: list[tuple[dict, dict]] = []
+    real = ca.nlpsol
+
+    def capture(name: str, plugin: str, nlp: dict, options: dict) -> ca.Function:
+        captured.append((nlp, options))
+        return real(name, plugin, nlp, options)
+
+    monkeypatch.setattr(trajectory.ca, "nlpsol", capture)
+    optimizer = TrajectoryOptimizer(
+        robot,
+        path_mode="arc",
+        clearance=env.clearance_function(robot, env.near_rows(robot, robot.theta_ref[None], 0.3)),
+        view=env.view_cone_function(robot),
+    )
+    optimizer._solver(12, (0, 5, 11), (6, 7), False)
+    optimizer._solver(12, (0, 5, 11), (0, 1), True)
+    q = ca.MX.sym("q", robot.n)
+    rows = ca.Function("rows", [q], [environment_rows(env, robot, q)])
+    trajectory._transfer_nlp(setup, rows, robot.theta_ref, robot.theta_ref + 0.3, robot.theta_ref + np.zeros((4, 1)))
+    assert len(captured) == 3
+    rng = np.random.default_rng(4)
+    for nlp, options in captured:
+        reference = real("reference", "ipopt", nlp, {"ipopt.print_level": 0, "print_time": False})
+        assert nlp["g"].size1() > 100  # the environment's rows are in it
+        for _ in range(3):
+            args = [
+                robot.theta_ref.tolist() * (nlp["x"].size1() // robot.n) + rng.normal(scale=0.3, size=nlp["x"].size1()),
+                rng.normal(size=nlp["p"].size1()),
+                rng.uniform(0.1, 2.0),
+                rng.normal(size=nlp["g"].size1()),
+            ]
+            ours = options["hess_lag"](*args).full()
+            theirs = reference.get_function("nlp_hess_l")(*args).full()
+            np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())

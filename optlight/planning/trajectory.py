@@ -25,6 +25,7 @@ The per-knot constraints are one SX function mapped over the knots, so the graph
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,12 +38,16 @@ from numpy.typing import NDArray
 from optlight.errors import IPOPT_ITERATION_LIMIT, SolverError, iteration_limit_error
 from optlight.geometry import LightSphere
 from optlight.planning.nlp import (
+    KnotRows,
+    Symbolic,
     arc_rows,
     environment_rows,
     ipopt_options,
     knot_bounds,
+    knot_hessian,
     light_rows,
     pin_rows,
+    stacked_rows,
     tangent_basis,
 )
 from optlight.planning.path import LightPath
@@ -71,6 +76,46 @@ class TrajectoryNLPResult:
     max_h_residual: float
     iterations: int
     time_s: float
+
+
+@functools.lru_cache(maxsize=16)
+def knot_function(light_pose: ca.Function) -> ca.Function:
+    """Per-knot constraints g(θ, O, b, n, u_start, u_end, t1, t2, a*) as one SX function:
+    [h (3); plane (1); wedge (2); pin (2); outside (1)], from the robot's symbolic ``light_pose``
+    θ → (a, R). Built once per robot (every window's solver, and its Hessian, use it)."""
+    theta = ca.SX.sym("theta", light_pose.size1_in(0))
+    center, normal, u0, u1, t1, t2, target = (
+        ca.SX.sym(s, 3) for s in ("O", "n", "u0", "u1", "t1", "t2", "a_star")
+    )
+    radius = ca.SX.sym("b")
+    a, rot = light_pose(theta)
+    h = light_rows(a, rot, center, radius)
+    plane, wedge = arc_rows(a, center, normal, u0, u1)
+    pin = pin_rows(a, target, t1, t2)
+    outside = (ca.sumsqr(a - center) - radius**2) / (2.0 * radius)
+    return ca.Function(
+        "knot_constraints",
+        [theta, center, radius, normal, u0, u1, t1, t2, target],
+        [ca.vertcat(h, plane, wedge, pin, outside)],
+    )
+
+
+def _knot_row_index(
+    blocks: list[tuple[Symbolic, list[int], list[int]]], outputs: int, n_knots: int
+) -> NDArray[np.int64]:
+    """(outputs, n_knots): the row of g that each output of the knot function is at each knot, −1
+    where it is not a row. ``blocks`` are g's blocks in order: the rows (a matrix, stacked column by
+    column into g), the free knots whose columns they are, and which outputs they hold; a block's
+    column of a fixed knot (the first, off the sphere) comes before the free ones."""
+    index = np.full((outputs, n_knots), -1)
+    offset = 0
+    for rows, knots, held in blocks:
+        if knots:
+            fixed = len(held) * (rows.size2() - len(knots))
+            stacked = np.arange(len(held) * len(knots)).reshape(len(knots), len(held)).T
+            index[np.ix_(held, knots)] = offset + fixed + stacked
+        offset += rows.numel()
+    return index
 
 
 class TrajectoryOptimizer:
@@ -107,34 +152,14 @@ class TrajectoryOptimizer:
         self.clearance = clearance
         self.view = view
         self.view_mode = view_mode
-        # the exact Hessian (IPOPT's default): the knot rows are small SX graphs, cheap to differentiate
+        # the exact Hessian, knot by knot (knot_hessian): the knot rows are small SX graphs
         self.options = ipopt_options(
             solver or SolverSpec(), ipopt__constr_viol_tol=1e-9, ipopt__hessian_approximation="exact"
         )
         if mu_init is not None:
             self.options["ipopt.mu_init"] = mu_init
         self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], bool], ca.Function] = {}
-        self._knot_fn = self._build_knot_function()
-
-    def _build_knot_function(self) -> ca.Function:
-        """Per-knot constraints g(θ, O, b, n, u_start, u_end, t1, t2, a*) as one SX function:
-        [h (3); plane (1); wedge (2); pin (2); outside (1)]."""
-        n = self.robot.n
-        theta = ca.SX.sym("theta", n)
-        center, normal, u0, u1, t1, t2, target = (
-            ca.SX.sym(s, 3) for s in ("O", "n", "u0", "u1", "t1", "t2", "a_star")
-        )
-        radius = ca.SX.sym("b")
-        a, rot = self.robot.symbolic_light_pose(theta)
-        h = light_rows(a, rot, center, radius)
-        plane, wedge = arc_rows(a, center, normal, u0, u1)
-        pin = pin_rows(a, target, t1, t2)
-        outside = (ca.sumsqr(a - center) - radius**2) / (2.0 * radius)
-        return ca.Function(
-            "knot_constraints",
-            [theta, center, radius, normal, u0, u1, t1, t2, target],
-            [ca.vertcat(h, plane, wedge, pin, outside)],
-        )
+        self._knot_fn = knot_function(robot.symbolic_light_pose)
 
     def _solver(
         self, n_knots: int, landmark_knots: tuple[int, ...], off_sphere: tuple[int, ...], fixed_start: bool
@@ -171,26 +196,50 @@ class TrajectoryOptimizer:
         # a fixed knot's rows are constants: only the free knots carry rows
         on_sphere = [k for k in free if k not in set(off_sphere)]
         landmarks = [k for k in landmark_knots if k in set(free)]
-        h = ca.vec(g_all[0:3, on_sphere])
-        pins = ca.vec(g_all[6:8, landmarks])
-        steps = ca.vec(theta[:, 1:] - theta[:, :-1])
-        constraints = [h, pins, steps, ca.vec(g_all[8, list(off_sphere)])]
+        interior = [k for k in on_sphere if k not in set(landmark_knots)] if self.path_mode == "arc" else []
+        view_knots = (free if self.view_mode == "path" else landmarks) if self.view is not None else []
+        # g: per block its rows and, for the knot function's rows, which of its outputs they are
+        blocks: list[tuple[Symbolic, list[int], list[int]]] = [
+            (g_all[0:3, on_sphere], on_sphere, [0, 1, 2]),
+            (g_all[6:8, landmarks], landmarks, [6, 7]),
+            (theta[:, 1:] - theta[:, :-1], [], []),
+            (g_all[8, list(off_sphere)], [k for k in off_sphere if k in set(free)], [8]),
+        ]
         if self.path_mode == "arc":
-            interior = [k for k in on_sphere if k not in set(landmark_knots)]
-            constraints += [ca.vec(g_all[3, interior]), ca.vec(g_all[4:6, interior])]
+            blocks += [(g_all[3, interior], interior, [3]), (g_all[4:6, interior], interior, [4, 5])]
+        knot_index = _knot_row_index(blocks, self._knot_fn.size1_out(0), n_knots)
+        constraints: list[Symbolic] = [ca.vec(rows) for rows, _, _ in blocks]
+        offset = sum(c.size1() for c in constraints)
+        environment: list[KnotRows] = []
         if self.clearance is not None:
             constraints.append(ca.vec(self.clearance.map(len(free))(variables)))
+            environment.append(stacked_rows(self.clearance, list(range(len(free))), offset))
+            offset += constraints[-1].size1()
         if self.view is not None:
-            knots = free if self.view_mode == "path" else landmarks
-            constraints.append(ca.vec(self.view.map(len(knots))(theta[:, knots])))
+            constraints.append(ca.vec(self.view.map(len(view_knots))(theta[:, view_knots])))
+            environment.append(stacked_rows(self.view, [k - int(fixed_start) for k in view_knots], offset))
         dtheta = theta[:, 1:] - theta[:, :-1]
         posture = theta - ca.repmat(theta_ref, 1, n_knots)
         w = ca.DM(np.sqrt(self.joint_weights))
         cost = ca.sumsqr(ca.repmat(w, 1, n_knots - 1) * dtheta) + self.posture_weight * ca.sumsqr(posture)
-        nlp = {"x": ca.vec(variables), "p": p, "f": cost, "g": ca.vertcat(*constraints)}
-        return ca.nlpsol("trajectory_nlp", "ipopt", nlp, self.options)
+        g = ca.vertcat(*constraints)
+        knot_rows = KnotRows(
+            self._knot_fn,
+            list(range(len(free))),
+            [
+                ca.repmat(center, 1, len(free)),
+                ca.repmat(radius, 1, len(free)),
+                *(per_knot[i : i + 3, free] for i in range(0, 18, 3)),
+            ],
+            knot_index[:, free],
+        )
+        hessian = knot_hessian(variables, p, cost, g.size1(), [knot_rows, *environment])
+        nlp = {"x": ca.vec(variables), "p": p, "f": cost, "g": g}
+        return ca.nlpsol("trajectory_nlp", "ipopt", nlp, {**self.options, "hess_lag": hessian})
 
-    def bounds(self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0, n_fixed: int = 0) -> tuple[Array, Array]:
+    def bounds(
+        self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0, n_fixed: int = 0
+    ) -> tuple[Array, Array]:
         """lbg, ubg in the order the constraints are stacked in the solver (``n_fixed`` of the
         landmark knots fixed)."""
         n = self.robot.n
@@ -205,7 +254,9 @@ class TrajectoryOptimizer:
         if self.clearance is not None:
             rows += self.clearance.size1_out(0) * (n_knots - n_fixed)
         if self.view is not None:
-            rows += self.view.size1_out(0) * ((n_knots if self.view_mode == "path" else n_landmarks) - n_fixed)
+            rows += self.view.size1_out(0) * (
+                (n_knots if self.view_mode == "path" else n_landmarks) - n_fixed
+            )
         lbg.append(np.zeros(rows))
         ubg.append(np.full(rows, np.inf))
         return np.concatenate(lbg), np.concatenate(ubg)
@@ -233,7 +284,9 @@ class TrajectoryOptimizer:
             per_knot[k, 9:12], per_knot[k, 12:15] = tangent_basis(path.directions[k])
         per_knot[:, 15:18] = path.positions
         theta0 = np.asarray(theta0, float)
-        p = np.concatenate([sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel(), theta0[0]])
+        p = np.concatenate(
+            [sphere.center, [sphere.radius], self.robot.theta_ref, per_knot.ravel(), theta0[0]]
+        )
         lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), int(fixed_start))
         lower, upper = knot_bounds(self.robot)
         lbx, ubx = np.tile(lower, len(free)), np.tile(upper, len(free))
@@ -277,7 +330,9 @@ ACTIVE_DISTANCE = 0.15
 ACTIVE_ROUNDS = 2
 
 
-def optimize_knots(setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False) -> TrajectoryNLPResult:
+def optimize_knots(
+    setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False
+) -> TrajectoryNLPResult:
     """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
     the first knot kept at its ``warm`` angles with ``fixed_start``.
 
@@ -439,7 +494,9 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     ) -> tuple[tuple[Array | None, str], Array | None]:
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
-            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=clearance_rows)]
+            "transfer_rows",
+            [q],
+            [environment_rows(environment, robot, q, view=view, clearance_rows=clearance_rows)],
         )
         knots, status = _transfer_nlp(setup, row_function, start, goal, initial)
         return (knots, status), knots
@@ -469,11 +526,17 @@ def _transfer_nlp(
     steps = knots[:, 1:] - knots[:, :-1]
     weights = ca.DM(1.0 / setup.limits.velocity)
     g = ca.vec(row_function.map(inner)(x))
-    nlp = {"x": ca.vec(x), "p": ca.vec(ends), "f": ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps), "g": g}
-    solver = ca.nlpsol("transfer", "ipopt", nlp, ipopt_options(setup.solver, ipopt__hessian_approximation="exact"))
+    cost = ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps)
+    options = ipopt_options(setup.solver, ipopt__hessian_approximation="exact")
+    options["hess_lag"] = knot_hessian(
+        x, ca.vec(ends), cost, g.size1(), [stacked_rows(row_function, list(range(inner)), 0)]
+    )
+    solver = ca.nlpsol("transfer", "ipopt", {"x": ca.vec(x), "p": ca.vec(ends), "f": cost, "g": g}, options)
     lower, upper = (np.tile(bound, inner) for bound in knot_bounds(setup.robot))
     x0 = np.clip(initial.ravel(), lower, upper)  # knot by knot, as ca.vec(x) stacks them
-    out = solver(x0=x0, p=np.c_[start, goal].T.ravel(), lbx=lower, ubx=upper, lbg=TRANSFER_PADDING, ubg=np.inf)
+    out = solver(
+        x0=x0, p=np.c_[start, goal].T.ravel(), lbx=lower, ubx=upper, lbg=TRANSFER_PADDING, ubg=np.inf
+    )
     status = str(solver.stats()["return_status"])
     if not solver.stats()["success"]:
         return None, status
@@ -492,4 +555,3 @@ def _thinned(knots: Array, step: float) -> Array:
     if kept[-1] != len(knots) - 1:
         kept.append(len(knots) - 1)
     return knots[kept]
-
