@@ -195,16 +195,18 @@ def sweep_costs(
     zenith, azimuth = np.atleast_1d(np.asarray(zenith, float)), np.atleast_1d(np.asarray(azimuth, float))
     out = np.empty((azimuth.size, zenith.size))
     for j, phi in enumerate(azimuth):
-        out[j] = _sweep_azimuth(scene, objective, zenith, float(phi))
+        out[j] = _sweep_azimuth(scene, objective, zenith, float(phi))[0]
         if progress is not None:
             progress(j + 1, azimuth.size)
     return out
 
 
-def _sweep_azimuth(scene: Scene, objective: Objective, zenith: Array, azimuth: float) -> Array:
+def _sweep_azimuth(scene: Scene, objective: Objective, zenith: Array, azimuth: float) -> tuple[Array, Array]:
+    """The objective at the zeniths (N,) along ``azimuth`` (rad), and their visibility masks (N, P)."""
     positions = scene.sphere.position(zenith, azimuth)
     masks = scene.visibility(positions)
-    return objective.numpy_batch(np.stack([scene.pixels(a, v) for a, v in zip(positions, masks, strict=True)]))
+    costs = objective.numpy_batch(np.stack([scene.pixels(a, v) for a, v in zip(positions, masks, strict=True)]))
+    return costs, masks
 
 
 def zenith_grid(sphere: LightSphere, step: float) -> Array:
@@ -328,13 +330,15 @@ class _Search:
         self.requested = setup.scene.sphere
 
     def refine(
-        self, seed: _Candidate, solve: Callable[[float, float, Array], Solve]
+        self, seed: _Candidate, solve: Callable[[float, float, Array], Solve], mask: Array | None = None
     ) -> tuple[_Candidate | None, int, str]:
-        """Refine from ``seed``; ``solve(θ, φ, v)`` runs the NLP. Returns the refined candidate scored
-        at the search resolution (None when IPOPT failed on the first solve), the iterations of all
-        solves and the first solve's status."""
+        """Refine from ``seed``; ``solve(θ, φ, v)`` runs the NLP; ``mask`` the seed's visibility at the
+        search resolution when known (the sweep's). Returns the refined candidate scored at the
+        search resolution (None when IPOPT failed on the first solve), the iterations of all solves
+        and the first solve's status."""
         zenith, azimuth = seed.zenith, seed.azimuth
-        mask = self.search.visibility(self.sphere.position(zenith, azimuth))
+        if mask is None:
+            mask = self.search.visibility(self.sphere.position(zenith, azimuth))
         iterations, first_status, candidate = 0, "", None
         for _ in range(VISIBILITY_ROUNDS):
             result = solve(zenith, azimuth, mask)
@@ -347,9 +351,9 @@ class _Search:
             if result.x.size == 2:
                 azimuth = float(result.x[1])
             position = self.sphere.position(zenith, azimuth)
-            cost = exact_cost(self.search, self.search_objective, position)
+            new_mask = self.search.visibility(position)  # the exact cost's: cast once for both
+            cost = float(self.search_objective.numpy(self.search.pixels(position, new_mask)))
             candidate = _Candidate(zenith, azimuth, cost, "refined", result.status)
-            new_mask = self.search.visibility(position)
             if np.array_equal(new_mask, mask):
                 break
             mask = new_mask
@@ -397,7 +401,8 @@ class _Search:
         else:
             mask = self.scene.visibility(self.sphere.position(best.zenith, best.azimuth))
             scored = [score(best, mask)]
-            if sample != best:
+            # a sample at the best's light scores the same: only a sample elsewhere is scored
+            if (sample.zenith, sample.azimuth) != (best.zenith, best.azimuth):
                 scored.append(score(sample))
             if polish:
                 scored.extend(self.polish(best, scored[0][0], mask))
@@ -516,7 +521,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
     histograms: list[Array] = []
     for j, phi in enumerate(azimuth):
         t0 = time.perf_counter()
-        costs[j] = _sweep_azimuth(search.search, search.search_objective, zenith, float(phi))
+        costs[j], masks = _sweep_azimuth(search.search, search.search_objective, zenith, float(phi))
         seeds = [
             _Candidate(float(zenith[i]), float(phi), float(costs[j, i]), "sweep")
             for i in allowed[local_minima(costs[j, allowed])]
@@ -528,7 +533,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
             def solve(_zenith: float, azimuth: float, mask: Array, bracket: tuple[float, float] = bracket) -> Solve:
                 return refiner.solve(azimuth, mask, bracket)
 
-            refined, its, status = search.refine(seed, solve)
+            refined, its, status = search.refine(seed, solve, masks[int(np.searchsorted(zenith, seed.zenith))])
             iterations += its
             first_status = first_status or status
             if refined is not None and refined.cost < best.cost:
