@@ -25,7 +25,7 @@ import numpy as np
 from optlight import load_problem
 from optlight.export import write_json
 from optlight.scene import Scene
-from optlight.scene.gbuffer import build_gbuffer, intersector
+from optlight.scene.gbuffer import RayCaster, build_gbuffer
 from optlight.scene.luminance import luminance_function
 from optlight.scene.objects import build_object
 
@@ -54,7 +54,7 @@ def run(repeats: int = 30) -> dict[str, Any]:
 
     results["object_build"] = _timings(lambda k: build_object(problem), repeats)
     results["gbuffer_256"] = _timings(
-        lambda k: build_gbuffer(scene.camera, scene.object, intersector(scene.mesh)), repeats
+        lambda k: build_gbuffer(scene.camera, scene.object, RayCaster(scene.mesh)), repeats
     )
     ones = np.ones(scene.gbuffer.size)
     results["render_256_no_shadows"] = _timings(

@@ -1,4 +1,4 @@
-"""The benchmark runner on synthetic components (never the real benchmarks): discovery, quick sizes,
+"""The benchmark runner on synthetic components (the real benchmarks are only imported): discovery, quick sizes,
 rows, the rich table, markdown and JSON, failures recorded with a non-zero exit status, the CLI."""
 
 from __future__ import annotations
@@ -211,3 +211,12 @@ def test_cli_help(capsys: pytest.CaptureFixture[str]) -> None:
 def test_cli_unknown_name(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["bench", "no_such_benchmark_or_problem"]) == 2
     assert "unknown benchmark 'no_such_benchmark_or_problem'" in capsys.readouterr().err
+
+
+def test_every_real_benchmark_imports_and_has_a_run(runner: ModuleType) -> None:
+    """Imports only (no benchmark runs): a renamed library function must fail here, not in the full
+    run an hour later (the scene benchmark once imported a function that had been renamed)."""
+    modules = {name: runner.load_module(path) for name, path in runner.components().items()}
+    modules["solve"] = runner.load_module(runner.BENCH_DIR / f"{runner.PIPELINE_MODULE}.py")
+    assert {"scene", "landmarks", "environment", "scaling", "command"} <= set(modules)
+    assert all(callable(getattr(m, "run", None)) for m in modules.values())
