@@ -515,9 +515,14 @@ def dask_client(
     core) on 127.0.0.1 with no dashboard. The client and the local cluster are closed on exit, whatever
     happens. An unreachable scheduler is a :class:`SchedulerError` after ``timeout_s`` seconds
     (default :data:`CONNECT_TIMEOUT_S`)."""
+    import dask
     from distributed import Client, LocalCluster
 
     timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
+    # The local cluster's nannies set these in this process's environment for their workers (e.g.
+    # OMP_NUM_THREADS=1) and leave them: restored on exit, or every later solve here would run
+    # single-threaded (optlight.threads follows OMP_NUM_THREADS).
+    spawn_environ = {name: os.environ.get(name) for name in dask.config.get("distributed.nanny.pre-spawn-environ", {})}
 
     cluster = None
     client = None
@@ -560,6 +565,11 @@ def dask_client(
             client.close()
         if cluster is not None:
             cluster.close()
+        for name, value in spawn_environ.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 def run_tasks(

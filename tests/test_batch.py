@@ -5,6 +5,7 @@ process left behind."""
 from __future__ import annotations
 
 import json
+import os
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -281,10 +282,15 @@ def test_a_finished_batch_starts_no_cluster(cluster_run: dict, monkeypatch: pyte
     assert again.skipped == again.ok == FAILS
 
 
-def test_the_local_cluster_listens_on_loopback_without_dashboard() -> None:
+def test_the_local_cluster_listens_on_loopback_without_dashboard(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every socket the cluster's processes listen on is on 127.0.0.1, and the scheduler's HTTP
-    endpoint serves no dashboard (its /status page is not found; /health answers)."""
+    endpoint serves no dashboard (its /status page is not found; /health answers). The thread
+    settings Dask's nannies put into this process's environment for their workers are undone on
+    exit (they would keep later solves here single-threaded)."""
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    monkeypatch.setenv("MKL_NUM_THREADS", "3")
     with dask_client(workers=1) as client:
+        assert os.environ.get("OMP_NUM_THREADS") == "1"  # what the workers were started with
         info = client.scheduler_info(n_workers=-1)
         processes = {psutil.Process().pid, *_children()}
         listening = [
@@ -298,6 +304,7 @@ def test_the_local_cluster_listens_on_loopback_without_dashboard() -> None:
         with pytest.raises(urllib.error.HTTPError) as missing:
             urllib.request.urlopen(f"{http}/status", timeout=10)
         assert missing.value.code == 404
+    assert "OMP_NUM_THREADS" not in os.environ and os.environ["MKL_NUM_THREADS"] == "3"
 
 
 def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Path) -> None:
