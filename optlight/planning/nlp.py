@@ -16,7 +16,8 @@ at a*" means the same expression in every NLP:
 - :func:`knot_bounds` the joint bounds of every NLP whose joint angles become knots of a trajectory.
 
 :func:`ipopt_options` gives IPOPT's settings from the solver configuration and :func:`run` calls a
-built ``nlpsol`` and returns a typed :class:`Solve`. Lengths in metres, angles in radians.
+built ``nlpsol`` and returns a typed :class:`Solve`; :func:`knot_hessian` gives the NLPs over knots
+their Hessian of the Lagrangian knot by knot (:class:`KnotRows`). Lengths in metres, angles in radians.
 """
 
 from __future__ import annotations
