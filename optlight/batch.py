@@ -74,6 +74,7 @@ from optlight.export import MANIFEST, check_output_folder, write_folder
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
+from optlight.threads import usable_cores
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -502,8 +503,8 @@ def write_table(out: Path, records: Sequence[RowRecord], keys: Sequence[str]) ->
 
 
 def default_workers() -> int:
-    """The cores this process may use."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    """One worker per core this process may use."""
+    return usable_cores()
 
 
 @contextmanager

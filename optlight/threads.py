@@ -16,13 +16,18 @@ from typing import TypeVar
 T = TypeVar("T")
 
 
+def usable_cores() -> int:
+    """The number of cores this process may run on (its CPU affinity where the OS has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def thread_count() -> int:
-    """Threads to split work over: ``OMP_NUM_THREADS`` when it is a positive integer, else the
-    number of cores this process may run on."""
+    """Threads to split work over: ``OMP_NUM_THREADS`` when it is a positive integer, else
+    :func:`usable_cores`."""
     value = os.environ.get("OMP_NUM_THREADS", "")
     if value.isdigit() and int(value) > 0:
         return int(value)
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return usable_cores()
 
 
 def map_slices(work: Callable[[slice], T], size: int, min_size: int) -> list[T]:
