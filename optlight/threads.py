@@ -9,6 +9,7 @@ batch is never oversubscribed. Otherwise it is the number of cores the process m
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -30,17 +31,51 @@ def thread_count() -> int:
     return usable_cores()
 
 
+_in_pool = threading.local()
+_pools: dict[int, ThreadPoolExecutor] = {}
+_pools_lock = threading.Lock()
+
+
+def _mark_pool_thread() -> None:
+    _in_pool.flag = True
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """The process's pool of ``workers`` threads, started on first use and kept. Starting the
+    threads on every call cost ~1 ms per call, as much as the rays of a 64-px search render."""
+    with _pools_lock:
+        if workers not in _pools:
+            _pools[workers] = ThreadPoolExecutor(
+                workers, thread_name_prefix="optlight", initializer=_mark_pool_thread
+            )
+        return _pools[workers]
+
+
+def _forget_pools() -> None:
+    """A forked child has none of its parent's threads: its pools start again on first use."""
+    global _pools_lock
+    _pools.clear()
+    _pools_lock = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
 def map_slices(work: Callable[[slice], T], size: int, min_size: int) -> list[T]:
     """``work`` on consecutive slices of ``range(size)``, each at least ``min_size`` long (one slice,
     in the calling thread, when ``size < 2 min_size`` or :func:`thread_count` is 1), in order.
 
-    ``work`` must release the GIL for the split to pay, and must not depend on another slice's
-    result. Results come back in slice order: concatenated, they are the same array whatever the
-    thread count."""
+    The calling thread works the first slice and a pool of threads kept for the process (:func:`_pool`)
+    the others. ``work`` must release the GIL for the split to pay, and must not depend on another
+    slice's result. Results come back in slice order: concatenated, they are the same array whatever
+    the thread count. Called from a pool thread, it works in that thread alone: a pool thread
+    waiting on its own pool could wait for ever."""
     parts = max(1, min(thread_count(), size // max(1, min_size)))
-    if parts == 1:
+    if parts == 1 or getattr(_in_pool, "flag", False):
         return [work(slice(0, size))]
     bounds = [size * k // parts for k in range(parts + 1)]
     slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
-    with ThreadPoolExecutor(parts) as pool:
-        return list(pool.map(work, slices))
+    rest = [_pool(parts - 1).submit(work, s) for s in slices[1:]]
+    first = work(slices[0])
+    return [first, *(f.result() for f in rest)]
