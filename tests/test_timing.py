@@ -132,6 +132,24 @@ def test_vectorised_evaluation_matches_toppras_parametrizer() -> None:
             np.testing.assert_allclose(value, motion.reference(t, order), rtol=1e-9, atol=1e-9)
 
 
+def test_samples_at_times_in_any_order_are_each_pieces_own_values() -> None:
+    """Shuffled times, boundaries among them, give the same values as the same times in order; and
+    each time's value is its piece's, evaluated on its own (the later piece at a boundary)."""
+    traj = time_parameterize(_segments(LANDMARKS), VMAX, AMAX, 0.2)
+    rng = np.random.default_rng(4)
+    times = np.concatenate([rng.uniform(0.0, traj.duration, 300), traj.boundaries])
+    shuffled = rng.permutation(times.size)
+    in_order, any_order = traj.sample(times), traj.sample(times[shuffled])
+    for a, b in zip(in_order, any_order, strict=True):
+        np.testing.assert_array_equal(a[shuffled], b)
+    piece = np.clip(np.searchsorted(traj._starts, times, side="right") - 1, 0, len(traj._pieces) - 1)
+    for k in (0, 17, 300, times.size - 1):
+        p = traj._pieces[piece[k]]
+        local = np.clip(times[k : k + 1] - traj._starts[piece[k]], 0.0, p.duration)
+        for value, own in zip(in_order, p.evaluate(local), strict=True):
+            np.testing.assert_array_equal(value[k], own[0])
+
+
 def test_degenerate_segment_takes_no_time() -> None:
     landmarks = np.array([[0.0, 0.0, 0.0], [0.5, 0.5, 0.5], [0.5, 0.5, 0.5], [0.0, 0.2, 0.0]])
     traj = time_parameterize(_segments(landmarks, bump=0.0), VMAX, AMAX, 0.25)
