@@ -47,6 +47,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
     from optlight.verify import VerificationReport, verify_trajectory
+    from optlight.viz.drawing import FigureWorker
     from optlight.viz.images import save_gray_png
     from optlight.viz.preview import Preview
 
@@ -78,6 +79,7 @@ _LAZY = {
     "Plan": "optlight.plan",
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
+    "FigureWorker": "optlight.viz.drawing",
     "save_gray_png": "optlight.viz.images",
     "acquire": "optlight.acquisition",
     "Acquisition": "optlight.acquisition",

@@ -100,6 +100,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     from optlight.export import check_output_folder
     from optlight.pipeline import STAGES, solve
     from optlight.preflight import preflight
+    from optlight.viz.drawing import FigureWorker
 
     out = Path(args.out) if args.out else Path("results") / resolve_problem_path(args.problem).stem
     check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
@@ -107,35 +108,39 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     console = Console()  # stdout: stderr carries only the one-line error of a failed run
     with console.status("building the scene, objectives, robot and environment"):
         setup = preflight(problem)  # built once: the solve below takes it as it is
-    with Progress(
-        TextColumn("{task.description:<10}"),
-        BarColumn(),
-        TextColumn("{task.completed}/{task.total}"),
-        TimeElapsedColumn(),
-        console=console,
-        transient=False,
-    ) as bars:
-        tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES}
+    # The figures are drawn in a process of their own, started now, once the problem has passed its
+    # checks: its imports take the core the solve leaves idle, and it draws while this process
+    # writes the exports and the preview.
+    with FigureWorker() as worker:
+        with Progress(
+            TextColumn("{task.description:<10}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TimeElapsedColumn(),
+            console=console,
+            transient=False,
+        ) as bars:
+            tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES}
 
-        def progress(stage: str, done: int, total: int) -> None:
-            interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
-            bars.start_task(tasks[stage])
-            bars.update(tasks[stage], completed=done, total=total)
+            def progress(stage: str, done: int, total: int) -> None:
+                interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
+                bars.start_task(tasks[stage])
+                bars.update(tasks[stage], completed=done, total=total)
 
-        with warnings.catch_warnings(record=True):
-            plan = solve(setup, progress=progress)
-    interrupts.check()
-    table = Table(title=f"optlight solve {problem.name}", show_header=False)
-    for key, value in _summary_rows(plan.summary()):
-        table.add_row(escape(key), escape(value))
-    console.print(table)
-    for note in plan.warnings:
-        # escaped: notes name problem-file sections ("[landmarks] allow_partial"), not rich markup
-        console.print(f"[yellow]warning:[/yellow] {escape(note)}")
-    if not plan.verification.passed:
-        console.print(escape(plan.verification.summary()))
-    with console.status(f"writing {out}/ (figures, preview, report)"):
-        plan.save(out, overwrite=args.force)  # refuses (VerificationError) when verification failed
+            with warnings.catch_warnings(record=True):
+                plan = solve(setup, progress=progress)
+        interrupts.check()
+        table = Table(title=f"optlight solve {problem.name}", show_header=False)
+        for key, value in _summary_rows(plan.summary()):
+            table.add_row(escape(key), escape(value))
+        console.print(table)
+        for note in plan.warnings:
+            # escaped: notes name problem-file sections ("[landmarks] allow_partial"), not rich markup
+            console.print(f"[yellow]warning:[/yellow] {escape(note)}")
+        if not plan.verification.passed:
+            console.print(escape(plan.verification.summary()))
+        with console.status(f"writing {out}/ (figures, preview, report)"):
+            plan.save(out, overwrite=args.force, worker=worker)  # refused (VerificationError) unless verified
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
         plan.preview().show()

@@ -48,7 +48,7 @@ import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import yaml
@@ -60,9 +60,6 @@ from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
 from optlight.spec import image_names
 from optlight.verify import VerificationReport
-
-if TYPE_CHECKING:
-    from matplotlib.figure import Figure
 
 Array = NDArray[np.float64]
 
@@ -262,7 +259,7 @@ def write_results(
     joint_names: Sequence[str],
     light_directions_camera: ArrayLike,
     image_pattern: str,
-    figures: Mapping[str, Figure] | None = None,
+    figures: Mapping[str, Callable[[], bytes]] | None = None,
     writers: Sequence[Callable[[Path], Sequence[Path]]] = (),
     overwrite: bool = False,
     csv_rate_hz: float = 100.0,
@@ -273,8 +270,9 @@ def write_results(
     Files: ``trajectory.csv`` (:meth:`Trajectory.to_csv` at ``csv_rate_hz`` plus the boundaries),
     ``plan.json`` (``plan_dict`` plus the verification report, the trajectory's timing, library
     versions and the creation time), ``lights.lp`` (one line per capture, in capture order, names
-    from ``image_pattern.format(index=i)``) and ``<name>.png`` for each of ``figures``; then the
-    manifest.
+    from ``image_pattern.format(index=i)``) and ``<name>.png`` for each of ``figures``, the PNG bytes
+    each callable returns; then the manifest. The figures are asked for last, so that one drawn in
+    another process meanwhile (:mod:`optlight.viz.drawing`) is not waited for before the rest.
 
     Args:
         light_directions_camera: (M, 3) unit vectors from the object towards the light at each capture,
@@ -338,10 +336,10 @@ def write_results(
         files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
         trajectory.to_csv(staging / "trajectory.csv", joint_names, rate_hz=csv_rate_hz)
         (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
-        for name, figure in (figures or {}).items():
-            figure.savefig(staging / f"{name}.png", dpi=120)
         for writer in writers:
             files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
+        for name, png in (figures or {}).items():
+            (staging / f"{name}.png").write_bytes(png())
         (staging / "plan.json").write_text(plan_text(files))
         return [staging / f for f in files]
 

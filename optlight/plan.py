@@ -21,12 +21,13 @@ from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
-from optlight.report import save_results
+from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.spec import Problem
 from optlight.verify import VerificationReport
+from optlight.viz.drawing import FigureJob, FigureWorker
 from optlight.viz.preview import Preview
 
 Array = NDArray[np.float64]
@@ -139,17 +140,28 @@ class Plan:
             obstacles=[o for o in obstacles if o.name != OBJECT],
         )
 
-    def save(self, folder: str | Path, *, overwrite: bool = False, preview: bool = True) -> list[Path]:
+    def save(
+        self,
+        folder: str | Path,
+        *,
+        overwrite: bool = False,
+        preview: bool = True,
+        worker: FigureWorker | None = None,
+    ) -> list[Path]:
         """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
         plan failed verification. ``folder`` must be new, empty or, with ``overwrite``, an earlier
-        optlight output (the output policy of :mod:`optlight.export`). Returns the paths written."""
-        summary, figures, writers = self.summary(), {}, []
+        optlight output (the output policy of :mod:`optlight.export`). ``worker`` draws the figures
+        in its process while this one writes the rest (:class:`~optlight.viz.drawing.FigureWorker`;
+        the same files). Returns the paths written."""
+        summary, writers = self.summary(), []
+        figures: dict[str, FigureJob] = {}
         if self.lightset is not None:
             capture = self.model_capture()
             summary["lightset"] = {**self.lightset, "recovery": capture.stats}
-            figures = dict(capture.figures)
+            figures = {name: FigureJob.of(figure, RESULTS_DPI) for name, figure in capture.figures.items()}
             if self.reach is not None:
-                figures["lightset_reach"] = self.reach.figure(lights=self.light_directions_sphere)
+                reach = self.reach.figure(lights=self.light_directions_sphere)
+                figures["lightset_reach"] = FigureJob.of(reach, RESULTS_DPI)
             writers = [files_writer(capture.files, PHOTOMETRIC_STEREO_FOLDER)]
         return save_results(
             folder,
@@ -169,6 +181,7 @@ class Plan:
             overwrite=overwrite,
             extra_figures=figures,
             extra_writers=writers,
+            worker=worker,
         )
 
     def model_capture(self) -> ModelCapture:

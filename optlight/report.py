@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,13 +33,17 @@ from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.setup import Setup
 from optlight.verify import VerificationReport
-from optlight.viz.figures import save_landmark_figures
+from optlight.viz.drawing import FigureJob
+from optlight.viz.figures import landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
 
 if TYPE_CHECKING:
-    from matplotlib.figure import Figure
+    from optlight.viz.drawing import FigureWorker
 
 Array = NDArray[np.float64]
+
+#: Resolution (dots per inch) of the trajectory and path figures and of a light set's figures.
+RESULTS_DPI = 120
 
 
 def plan_dict(
@@ -237,43 +242,46 @@ def save_results(
     light_directions_camera: Array,
     preview: Callable[[Path], Path] | None = None,
     overwrite: bool = False,
-    extra_figures: Mapping[str, Figure] | None = None,
+    extra_figures: Mapping[str, FigureJob] | None = None,
     extra_writers: Sequence[Callable[[Path], list[Path]]] = (),
+    worker: FigureWorker | None = None,
 ) -> list[Path]:
     """Write the results folder of a verified plan (see the module docstring); returns the paths.
     ``preview(path)`` writes ``preview.html`` (left out when None); ``extra_figures`` and
-    ``extra_writers`` add figures and files (a light set's photometric-stereo folder).
+    ``extra_writers`` add figures and files (a light set's photometric-stereo folder); ``worker``
+    draws the figures while the rest is written (:mod:`optlight.viz.drawing`), else they are drawn
+    here.
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
     robot, limits = setup.robot, setup.limits
     timed = trajectory.sample(trajectory.sample_times(20.0))[0]
+    bounds = partial(
+        trajectory_figure,
+        lower=limits.lower,
+        upper=limits.upper,
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+    )
+    positions = (
+        robot.light_positions(nlp.theta),  # the knots, off the sphere on the transfers
+        robot.light_positions(timed),
+        np.array([lm.position for lm in visited]),
+    )
     figures = {
-        "trajectory": trajectory_figure(
-            trajectory,
-            lower=limits.lower,
-            upper=limits.upper,
-            velocity_limit=limits.velocity,
-            acceleration_limit=limits.acceleration,
-        ),
-        "path": path_figure(
-            setup.sphere,
-            robot.light_positions(nlp.theta),  # the knots, off the sphere on the transfers
-            robot.light_positions(timed),
-            np.array([lm.position for lm in visited]),
-        ),
+        "trajectory": FigureJob(bounds, (trajectory,), RESULTS_DPI),
+        "path": FigureJob(path_figure, (setup.sphere, *positions), RESULTS_DPI),
+        # a set has no sweep or reference
+        **(landmark_figures(landmarks, setup.scene) if landmarks.mode != "set" else {}),
         **(extra_figures or {}),
     }
-
-    def landmark_figures(folder: Path) -> list[Path]:
-        return save_landmark_figures(landmarks, setup.scene, folder)
 
     def preview_html(folder: Path) -> list[Path]:
         assert preview is not None
         return [preview(folder / "preview.html")]
 
     def report(folder: Path) -> list[Path]:
-        names = sorted(p.name for p in folder.glob("*.png"))
+        names = sorted(f"{name}.png" for name in figures)
         out = folder / "report.md"
         out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
         return [out]
@@ -298,7 +306,6 @@ def save_results(
         ]
 
     writers = [
-        *([landmark_figures] if landmarks.mode != "set" else []),  # a set has no sweep or reference
         joint_trajectory,
         captures,
         *([preview_html] if preview is not None else []),
@@ -313,7 +320,7 @@ def save_results(
         joint_names=robot.joint_names,
         light_directions_camera=light_directions_camera,
         image_pattern=setup.trajectory_spec.image_pattern,
-        figures=figures,
+        figures={name: worker.draw(job).result if worker else job.png for name, job in figures.items()},
         writers=writers,
         overwrite=overwrite,
         csv_rate_hz=traj_spec.rate_hz,

@@ -525,6 +525,25 @@ def test_outputs_land_whole_and_force_keeps_user_files(
     assert (tmp_path / "empty" / "a.png").read_bytes()[:4] == b"\x89PNG"
 
 
+def test_solve_writes_every_figure_and_stops_its_figure_worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command draws its figures in a worker process: all of them land, as PNGs, and the
+    process is gone when the command returns."""
+    import multiprocessing
+
+    small = problem(tmp_path, "small")
+    monkeypatch.chdir(tmp_path)
+    before = set(multiprocessing.active_children())
+    assert main(["solve", small, "--out", "out"]) == 0
+    assert not set(multiprocessing.active_children()) - before
+    pngs = sorted(p.name for p in (tmp_path / "out").glob("*.png"))
+    stems = ["landmarks_cost", "landmarks_histograms", "landmarks_images", "landmarks_polar", "path", "trajectory"]
+    assert pngs == [f"{stem}.png" for stem in stems]
+    for name in pngs:
+        with Image.open(tmp_path / "out" / name) as image:
+            assert min(image.size) > 100 and len(image.getcolors(1 << 16) or range(257)) > 16  # drawn, not blank
+    assert all(f"![{stem}]({stem}.png)" in (tmp_path / "out" / "report.md").read_text() for stem in stems)
+
+
 # --------------------------------------------------------------------------------------------
 # Properties: mutated mesh files, any --out target
 # --------------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.scene.camera import Camera
 from optlight.spec import image_names
 from optlight.verify import VerificationReport, verify_trajectory
+from optlight.viz.drawing import FigureJob
 from optlight.viz.trajectory_figures import save_trajectory_figure, trajectory_figure
 
 CENTER = np.array([0.45, -0.25, 0.35])
@@ -103,7 +104,7 @@ def test_write_results(tmp_path) -> None:
         joint_names=NAMES,
         light_directions_camera=directions(),
         image_pattern="img_{index:03d}.png",
-        figures={"trajectory": fig},
+        figures={"trajectory": FigureJob.of(fig, 120).png},
     )
     assert [f.name for f in files] == ["trajectory.csv", "plan.json", "lights.lp", "trajectory.png"]
     assert all(f.is_file() and f.stat().st_size > 0 for f in files)
@@ -154,9 +155,8 @@ def test_refuses_a_failing_report_and_leaves_nothing(tmp_path) -> None:
 def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
     traj, report = plan()
 
-    class Broken:
-        def savefig(self, *args, **kwargs) -> None:  # noqa: ANN002, ANN003
-            raise OSError("disk full")
+    def broken() -> bytes:
+        raise OSError("disk full")
 
     with pytest.raises(OSError, match="disk full"):
         write_results(
@@ -167,7 +167,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
             joint_names=NAMES,
             light_directions_camera=directions(),
             image_pattern="img_{index:03d}.png",
-            figures={"broken": Broken()},
+            figures={"broken": broken},
         )
     assert list(tmp_path.iterdir()) == []
     with pytest.raises(TypeError, match="plan_dict.thing"):

@@ -13,7 +13,13 @@ from optlight.planning.timing import time_parameterize
 from optlight.robot import load_robot
 from optlight.scene import Scene
 from optlight.spec import problem_from_dict
-from optlight.viz.figures import CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN, plot_contact_sheet
+from optlight.viz.drawing import FigureJob
+from optlight.viz.figures import (
+    CONTACT_SHEET_CELL_IN,
+    CONTACT_SHEET_TILE_IN,
+    contact_sheet_figure,
+    contact_sheet_images,
+)
 from optlight.viz.trajectory_figures import trajectory_figure
 
 
@@ -36,7 +42,9 @@ def test_contact_sheet_puts_each_image_in_its_cell(tmp_path):
         SimpleNamespace(index=i, zenith=0.9, azimuth=a, position=p)
         for i, (a, p) in enumerate(zip(azimuths, positions, strict=True))
     )
-    sheet = plot_contact_sheet(landmarks, scene, tmp_path / "sheet.png", columns=3)  # type: ignore[arg-type]
+    images = contact_sheet_images(landmarks, scene)  # type: ignore[arg-type]
+    figure = contact_sheet_figure(landmarks, images, scene.light.saturation, columns=3)  # type: ignore[arg-type]
+    sheet = FigureJob.of(figure, 110).save(tmp_path / "sheet.png")
     png = np.asarray(Image.open(sheet).convert("L"), float)
     dpi = png.shape[1] / (3 * CONTACT_SHEET_CELL_IN[0])
     (cell_w, cell_h), tile = CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN

@@ -86,6 +86,19 @@ def test_dwells_at_rest_and_segments_join_the_landmarks() -> None:
     assert np.abs(qdd).max() < 1e-6
 
 
+def test_a_pickled_trajectory_samples_the_same_without_ruckigs_copy() -> None:
+    # What a worker process receives (figures drawn there): the same values, bit for bit.
+    import pickle
+
+    traj = jerk_limited_timing(_segments(LANDMARKS), VMAX, AMAX, JMAX, 0.3)
+    copy = pickle.loads(pickle.dumps(traj))
+    t = np.linspace(0.0, traj.duration, 501)
+    for a, b in zip([*traj.sample(t), traj.jerk(t)], [*copy.sample(t), copy.jerk(t)], strict=True):
+        np.testing.assert_array_equal(a, b)
+    motions = [p for p in copy._pieces if isinstance(p, JerkLimitedMotion)]
+    assert len(motions) == len(LANDMARKS) - 1 and all(m.reference is None for m in motions)
+
+
 def test_same_geometric_path_as_toppra_and_slower_but_continuous() -> None:
     segments = _segments(LANDMARKS)
     jerk = jerk_limited_timing(segments, VMAX, AMAX, JMAX, 0.0)

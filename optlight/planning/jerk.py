@@ -42,6 +42,7 @@ sound by construction, which a smoothed TOPPRA profile is not.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import ruckig
@@ -147,11 +148,12 @@ class JerkLimitedMotion:
         inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
         inp.target_position, inp.target_velocity, inp.target_acceleration = [self.length], [0.0], [0.0]
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
-        self.reference = ruckig.Trajectory(1)
-        result = otg.calculate(inp, self.reference)
+        reference = ruckig.Trajectory(1)
+        result = otg.calculate(inp, reference)
         if result not in (ruckig.Result.Working, ruckig.Result.Finished):
             raise SolverError(f"segment {index}: ruckig returned {result} for bounds V={v}, A={a}, J={j}")
-        profile = self.reference.profiles[0][0]
+        self.reference: ruckig.Trajectory | None = reference  # ruckig's own, which the tests compare
+        profile = reference.profiles[0][0]
         if profile.brake.duration > 0 or profile.accel.duration > 0:
             raise SolverError(f"segment {index}: ruckig planned a braking phase from rest (ruckig changed?)")
         self._phase_t = np.asarray(profile.t, float)
@@ -160,6 +162,11 @@ class JerkLimitedMotion:
         self._a = np.asarray(profile.a, float)[:7]
         self._v = np.asarray(profile.v, float)[:7]
         self._p = np.asarray(profile.p, float)[:7]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """ruckig's trajectory does not pickle, and the evaluation needs only its phases: a copy
+        (a figure drawn in a worker process) holds None in its place."""
+        return {**self.__dict__, "reference": None}
 
     @property
     def duration(self) -> float:

@@ -1,8 +1,9 @@
-"""Figures (matplotlib, PNG, headless): small functions that take results and an output path and
-return the path written.
+"""Figures (matplotlib, PNG, headless): small functions that take results and return a figure.
 
-Landmark figures: :func:`plot_landmarks_polar` (the paper's Fig. 1), :func:`plot_histograms`,
-:func:`plot_contact_sheet`, :func:`plot_cost_map`; :func:`save_landmark_figures` writes all four.
+Landmark figures: :func:`landmarks_polar_figure` (the paper's Fig. 1), :func:`histograms_figure`,
+:func:`contact_sheet_figure`, :func:`cost_map_figure`; :func:`landmark_figures` gives all four as
+:class:`~optlight.viz.drawing.FigureJob` s (drawn here or in a worker process), and
+:func:`save_landmark_figures` writes them.
 Figures are drawn on :class:`matplotlib.figure.Figure` objects, never through pyplot, so nothing
 depends on a display or on global backend state. Angles are shown in degrees.
 """
@@ -21,6 +22,7 @@ from matplotlib.projections.polar import PolarAxes
 
 from optlight.planning.landmarks import LandmarkSet
 from optlight.scene import Scene
+from optlight.viz.drawing import FigureJob
 from optlight.viz.layout import set_margins
 
 #: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
@@ -29,15 +31,8 @@ COST_FLOOR = 1e-12
 #: cell's bottom edge, centred across, its label above.
 CONTACT_SHEET_CELL_IN = (1.4, 1.55)
 CONTACT_SHEET_TILE_IN = 1.3
-
-
-def _save(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` as it is laid out (no ``bbox_inches="tight"``: measuring the drawn figure to
-    crop it draws it twice)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    return path
+#: Resolution (dots per inch) of the landmark figures' PNGs.
+LANDMARK_FIGURE_DPI = 110
 
 
 def _polar_axes(fig: Figure, r_max: float) -> PolarAxes:
@@ -67,9 +62,7 @@ def radial_limit(landmarks: LandmarkSet, zenith_max: float, fixed_zenith: float 
     return min(zenith_max, math.radians(5 * math.ceil(max(math.degrees(1.4 * largest), 1e-9) / 5)))
 
 
-def plot_landmarks_polar(
-    landmarks: LandmarkSet, path: str | Path, r_max: float, fixed_zenith: float | None = None
-) -> Path:
+def landmarks_polar_figure(landmarks: LandmarkSet, r_max: float, fixed_zenith: float | None = None) -> Figure:
     """The landmarks projected on the plane (the paper's Fig. 1): radius = zenith (deg), angle =
     azimuth; circles for the landmarks, stars for the fixed-zenith circle at the same azimuths
     (``fixed_zenith``, rad; the paper's 10° trajectory). ``r_max`` (rad) is the radial limit."""
@@ -94,7 +87,7 @@ def plot_landmarks_polar(
     ax.plot(az, zen, "o", mfc="none", color="tab:blue", ms=7, label="landmarks")
     ax.set_title(f"Landmarks ({len(landmarks)}, {landmarks.mode} mode): radius = zenith (deg)", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8, frameon=False)
-    return _save(fig, path)
+    return fig
 
 
 def _shade_view(ax: PolarAxes, view_zenith: float) -> None:
@@ -115,7 +108,7 @@ def _shade_view(ax: PolarAxes, view_zenith: float) -> None:
     )
 
 
-def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[int] | None = None) -> Path:
+def histograms_figure(landmarks: LandmarkSet, indices: Sequence[int] | None = None) -> Figure:
     """Reference against achieved soft histograms at a few landmarks (default: four spread over the
     set), bins on normalised luminance [0, 1]."""
     n = len(landmarks)
@@ -139,12 +132,23 @@ def plot_histograms(landmarks: LandmarkSet, path: str | Path, indices: Sequence[
     axes[0].legend(fontsize=8, frameon=False)
     # two-line titles on top
     set_margins(fig, left=0.7, right=0.15, top=0.55, bottom=0.5, columns=len(fig.axes), gap_x=0.3)
-    return _save(fig, path)
+    return fig
 
 
-def plot_contact_sheet(landmarks: LandmarkSet, scene: Scene, path: str | Path, columns: int = 6) -> Path:
-    """The camera image (NumPy renderer, shadow rays) at every landmark, in a grid, each labelled with
-    its index, zenith and azimuth.
+def contact_sheet_images(landmarks: LandmarkSet, scene: Scene) -> np.ndarray:
+    """The camera image (NumPy renderer, shadow rays) at every landmark, (M, H, W): every light's
+    shadow rays in one ray-caster call."""
+    positions = np.array([lm.position for lm in landmarks.landmarks]).reshape(-1, 3)
+    visibility = scene.visibility(positions)
+    images = [scene.to_image(scene.pixels(p, v)) for p, v in zip(positions, visibility, strict=True)]
+    return np.array(images, float).reshape(len(positions), scene.camera.height, scene.camera.width)
+
+
+def contact_sheet_figure(
+    landmarks: LandmarkSet, images: np.ndarray, saturation: float, columns: int = 6
+) -> Figure:
+    """The camera images at the landmarks (:func:`contact_sheet_images`; grey levels 0 to
+    ``saturation``) in a grid, each labelled with its index, zenith and azimuth.
 
     Drawn as images and labels on one axes spanning the figure, laid out in inches
     (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
@@ -153,20 +157,15 @@ def plot_contact_sheet(landmarks: LandmarkSet, scene: Scene, path: str | Path, c
     cols = max(1, min(columns, n))
     rows = math.ceil(n / cols)
     (cell_w, cell_h), tile = CONTACT_SHEET_CELL_IN, CONTACT_SHEET_TILE_IN
-    positions = np.array([lm.position for lm in landmarks.landmarks]).reshape(-1, 3)
-    visibility = scene.visibility(positions)  # every light's shadow rays in one ray-caster call
     fig = Figure(figsize=(cell_w * cols, cell_h * rows))
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
     ax.set_xlim(0.0, cell_w * cols)
     ax.set_ylim(cell_h * rows, 0.0)  # inches from the top left corner
     ax.axis("off")
-    for k, (lm, position, v) in enumerate(zip(landmarks.landmarks, positions, visibility, strict=True)):
+    for k, (lm, image) in enumerate(zip(landmarks.landmarks, images, strict=True)):
         x = cell_w * (k % cols) + 0.5 * (cell_w - tile)
         y = cell_h * (k // cols) + cell_h - tile - 0.05
-        image = scene.to_image(scene.pixels(position, v))
-        ax.imshow(
-            image, cmap="gray", vmin=0.0, vmax=scene.light.saturation, extent=(x, x + tile, y + tile, y)
-        )
+        ax.imshow(image, cmap="gray", vmin=0.0, vmax=saturation, extent=(x, x + tile, y + tile, y))
         ax.text(
             x + 0.5 * tile,
             y - 0.04,
@@ -175,10 +174,10 @@ def plot_contact_sheet(landmarks: LandmarkSet, scene: Scene, path: str | Path, c
             ha="center",
             va="bottom",
         )
-    return _save(fig, path)
+    return fig
 
 
-def plot_cost_map(landmarks: LandmarkSet, path: str | Path, r_max: float) -> Path:
+def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
     """The coarse sweep's cost over (zenith, azimuth) as a polar heat map (radius = zenith in deg up
     to ``r_max`` (rad), logarithmic colours over five decades below the largest cost), the landmarks
     on top."""
@@ -203,20 +202,29 @@ def plot_cost_map(landmarks: LandmarkSet, path: str | Path, r_max: float) -> Pat
     width, height = landmarks.resolution
     ax.set_title(f"Sweep cost (search renders {width}×{height}), landmarks in red", fontsize=10)
     fig.colorbar(mesh, ax=ax, pad=0.1, shrink=0.8, label="cost")
-    return _save(fig, path)
+    return fig
 
 
-def save_landmark_figures(landmarks: LandmarkSet, scene: Scene, folder: str | Path) -> list[Path]:
-    """All landmark figures into ``folder``: landmarks_polar.png, landmarks_histograms.png,
-    landmarks_images.png, landmarks_cost.png. The fixed-zenith circle is the reference light's zenith
-    when the reference is a light; the polar plots zoom to :func:`radial_limit`."""
-    folder = Path(folder)
+def landmark_figures(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
+    """The landmark figures by file stem: landmarks_polar, landmarks_histograms, landmarks_images,
+    landmarks_cost. The fixed-zenith circle is the reference light's zenith when the reference is a
+    light; the polar plots zoom to :func:`radial_limit`. The contact sheet's images are rendered
+    here, so every job holds numbers only."""
     ref = scene.problem.objective.reference
     fixed = math.radians(ref.zenith_deg) if ref.kind == "light" else None
     r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed)
-    return [
-        plot_landmarks_polar(landmarks, folder / "landmarks_polar.png", r_max, fixed),
-        plot_histograms(landmarks, folder / "landmarks_histograms.png"),
-        plot_contact_sheet(landmarks, scene, folder / "landmarks_images.png"),
-        plot_cost_map(landmarks, folder / "landmarks_cost.png", r_max),
-    ]
+    images = contact_sheet_images(landmarks, scene)
+    dpi = LANDMARK_FIGURE_DPI
+    return {
+        "landmarks_polar": FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed), dpi),
+        "landmarks_histograms": FigureJob(histograms_figure, (landmarks,), dpi),
+        "landmarks_images": FigureJob(contact_sheet_figure, (landmarks, images, scene.light.saturation), dpi),
+        "landmarks_cost": FigureJob(cost_map_figure, (landmarks, r_max), dpi),
+    }
+
+
+def save_landmark_figures(landmarks: LandmarkSet, scene: Scene, folder: str | Path) -> list[Path]:
+    """All :func:`landmark_figures` written into ``folder`` as ``<name>.png``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    return [job.save(folder / f"{name}.png") for name, job in landmark_figures(landmarks, scene).items()]

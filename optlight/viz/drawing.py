@@ -1,0 +1,135 @@
+"""Figures as jobs, drawn here or in a worker process while this one goes on writing.
+
+A :class:`FigureJob` is a module-level function that builds a :class:`matplotlib.figure.Figure`,
+its (picklable) arguments and the PNG's resolution. :meth:`FigureJob.png` draws it in this process;
+a :class:`FigureWorker` draws it in a process of its own. Drawing is most of the time it takes to
+write a plan's results (the six figures of the default problem ~1.5 s, the rest ~1 s), and it needs
+only the plan's numbers, so the command line starts a worker before it solves (its imports take the
+idle core) and hands it the figures while it writes the exports and the preview.
+
+The worker is spawned, not forked: a fresh interpreter inherits none of this process's threads
+(Embree's, the ray caster's pool) or locks. It ignores Ctrl-C from its first instant, which this
+process handles and answers by closing the worker.
+"""
+
+from __future__ import annotations
+
+import importlib
+import io
+import multiprocessing
+import signal
+from collections.abc import Callable
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from matplotlib.figure import Figure
+
+
+@dataclass(frozen=True)
+class FigureJob:
+    """A figure to draw: ``build(*args)`` returns it, saved as a PNG at ``dpi``. ``build`` is a
+    module-level function and ``args`` pickle, so a :class:`FigureWorker` can draw it."""
+
+    build: Callable[..., Figure]
+    args: tuple[Any, ...]
+    dpi: int
+
+    @classmethod
+    def of(cls, figure: Figure, dpi: int) -> FigureJob:
+        """A figure built already (matplotlib figures pickle): only its drawing is left."""
+        return cls(_as_built, (figure,), dpi)
+
+    def png(self) -> bytes:
+        """The figure drawn (Agg) as PNG bytes, laid out as built (no tight bounding box)."""
+        buffer = io.BytesIO()
+        self.build(*self.args).savefig(buffer, format="png", dpi=self.dpi)
+        return buffer.getvalue()
+
+    def save(self, path: str | Path) -> Path:
+        """The PNG written to ``path``."""
+        path = Path(path)
+        path.write_bytes(self.png())
+        return path
+
+
+def _as_built(figure: Figure) -> Figure:
+    return figure
+
+
+def _draw(job: FigureJob) -> bytes:
+    return job.png()
+
+
+def _block_sigint() -> set[int | signal.Signals] | None:
+    """Block SIGINT in this thread; the previous mask (None where the OS has no signal masks)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        return None
+    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+
+
+def _restore_signals(mask: set[int | signal.Signals] | None) -> None:
+    if mask is not None:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
+def _start_worker() -> None:
+    """In the worker: leave Ctrl-C to the parent, which closes the worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+#: Modules a worker imports before its first figure: those of a plan's figures (and, through them,
+#: the classes their arguments unpickle into). Named, not imported here: they import this module.
+PRELOAD = ("optlight.viz.figures", "optlight.viz.trajectory_figures")
+
+
+def _warm_up() -> None:
+    """In the worker: import :data:`PRELOAD` and draw a small figure with text, so that the first
+    real figure does not pay for the imports and the font cache."""
+    for name in PRELOAD:
+        importlib.import_module(name)
+    figure = Figure(figsize=(1.0, 1.0))
+    figure.add_subplot().set_title("warm-up")
+    figure.savefig(io.BytesIO(), format="png", dpi=50)
+
+
+class FigureWorker:
+    """One process that draws :class:`FigureJob` s: :meth:`draw` returns at once with a future of
+    the PNG bytes. The process starts (and warms up, :func:`_warm_up`) when the worker is made and
+    stops on :meth:`close` or at the end of a ``with`` block, which drops the figures not drawn yet.
+
+    Like any spawned process, it imports the main module of a script that makes one: such a script
+    needs the ``if __name__ == "__main__":`` guard (the ``optlight`` command has it).
+    """
+
+    def __init__(self) -> None:
+        self._pool = ProcessPoolExecutor(
+            max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker
+        )
+        # The process starts with the first job: now, not at the first figure. SIGINT is blocked
+        # while it starts, so that it is born ignoring Ctrl-C (the mask carries over to the new
+        # interpreter) rather than printing a KeyboardInterrupt from its imports; here a Ctrl-C
+        # meanwhile waits, and is delivered on unblocking.
+        blocked = _block_sigint()
+        try:
+            self._pool.submit(_warm_up)
+        finally:
+            _restore_signals(blocked)
+
+    def draw(self, job: FigureJob) -> Future[bytes]:
+        """The PNG bytes of ``job``, drawn in the worker (errors come back through the future)."""
+        return self._pool.submit(_draw, job)
+
+    def close(self) -> None:
+        """Stop the process once the figure it is drawing is done; figures still queued are dropped."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> FigureWorker:
+        return self
+
+    def __exit__(
+        self, kind: type[BaseException] | None, value: BaseException | None, traceback: TracebackType | None
+    ) -> None:
+        self.close()
