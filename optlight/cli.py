@@ -128,7 +128,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
                 bars.update(tasks[stage], completed=done, total=total)
 
             with warnings.catch_warnings(record=True):
-                plan = solve(setup, progress=progress)
+                plan = solve(setup, progress=progress, worker=worker)
         interrupts.check()
         table = Table(title=f"optlight solve {problem.name}", show_header=False)
         for key, value in _summary_rows(plan.summary()):

@@ -54,9 +54,11 @@ from optlight.planning.set_landmarks import (
 )
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
+from optlight.report import landmark_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem
 from optlight.verify import VerificationReport, verify_trajectory
+from optlight.viz.drawing import FigureWorker
 
 Array = NDArray[np.float64]
 
@@ -66,9 +68,16 @@ Progress = Callable[[str, int, int], None]
 STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
 
 
-def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = None) -> Plan:
+def solve(
+    problem: Problem | Setup | str | Path,
+    *,
+    progress: Progress | None = None,
+    worker: FigureWorker | None = None,
+) -> Plan:
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
-    end to end.
+    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the landmark figures
+    of the results folder are drawn there once the landmarks are found, while the robot's motion is
+    planned (:attr:`Plan.figures`).
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
@@ -93,6 +102,8 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
     reacher = Reacher(setup)
     landmarks, design, captures, merged = choose_captures(setup, lambda d, t: notify("landmarks", d, t), reacher)
     timings["landmarks"] = time.perf_counter() - start
+    # drawn there while the motion is planned
+    figures = {n: worker.draw(job) for n, job in landmark_jobs(landmarks, setup.scene).items()} if worker else {}
 
     with stage("placement"):
         placement = place_captures(setup, captures, design, reacher)
@@ -143,6 +154,7 @@ def solve(problem: Problem | Setup | str | Path, *, progress: Progress | None = 
         warnings=tuple(notes),
         lightset=lightset,
         reach=design.reach if design is not None else None,
+        figures=figures,
     )
 
 

@@ -7,6 +7,8 @@ own module) and composes them for the user: the key numbers (:meth:`Plan.summary
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -47,7 +49,8 @@ class Plan:
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
     None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
-    for other plans).
+    for other plans); ``figures`` the results folder's figures a worker process drew while the rest
+    was solved (``solve(..., worker=...)``), by file stem, which :meth:`save` takes as they are.
     """
 
     setup: Setup
@@ -63,6 +66,7 @@ class Plan:
     warnings: tuple[str, ...] = field(default=())
     lightset: dict[str, Any] | None = None
     reach: ReachabilityMap | None = None
+    figures: Mapping[str, Future[bytes]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def problem(self) -> Problem:
@@ -182,6 +186,7 @@ class Plan:
             extra_figures=figures,
             extra_writers=writers,
             worker=worker,
+            drawn=self.figures,
         )
 
     def model_capture(self) -> ModelCapture:

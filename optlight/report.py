@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import Future
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -31,6 +32,7 @@ from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob
@@ -225,6 +227,20 @@ def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
     return lines
 
 
+def landmark_jobs(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
+    """The landmark figures of a results folder (:func:`~optlight.viz.figures.landmark_figures`);
+    none for a light set, which has no sweep or reference."""
+    return landmark_figures(landmarks, scene) if landmarks.mode != "set" else {}
+
+
+def _png_source(job: FigureJob, drawn: Future[bytes] | None, worker: FigureWorker | None) -> Callable[[], bytes]:
+    """Where a figure's PNG comes from: a worker that drew it already (unless it was dropped), else
+    the worker now, else this process when asked."""
+    if drawn is not None and not drawn.cancelled():
+        return drawn.result
+    return worker.draw(job).result if worker is not None else job.png
+
+
 def save_results(
     folder: str | Path,
     *,
@@ -245,12 +261,13 @@ def save_results(
     extra_figures: Mapping[str, FigureJob] | None = None,
     extra_writers: Sequence[Callable[[Path], list[Path]]] = (),
     worker: FigureWorker | None = None,
+    drawn: Mapping[str, Future[bytes]] | None = None,
 ) -> list[Path]:
     """Write the results folder of a verified plan (see the module docstring); returns the paths.
     ``preview(path)`` writes ``preview.html`` (left out when None); ``extra_figures`` and
     ``extra_writers`` add figures and files (a light set's photometric-stereo folder); ``worker``
     draws the figures while the rest is written (:mod:`optlight.viz.drawing`), else they are drawn
-    here.
+    here; ``drawn`` are figures a worker drew (or is drawing) already, by file stem.
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
@@ -271,8 +288,7 @@ def save_results(
     figures = {
         "trajectory": FigureJob(bounds, (trajectory,), RESULTS_DPI),
         "path": FigureJob(path_figure, (setup.sphere, *positions), RESULTS_DPI),
-        # a set has no sweep or reference
-        **(landmark_figures(landmarks, setup.scene) if landmarks.mode != "set" else {}),
+        **landmark_jobs(landmarks, setup.scene),
         **(extra_figures or {}),
     }
 
@@ -320,7 +336,7 @@ def save_results(
         joint_names=robot.joint_names,
         light_directions_camera=light_directions_camera,
         image_pattern=setup.trajectory_spec.image_pattern,
-        figures={name: worker.draw(job).result if worker else job.png for name, job in figures.items()},
+        figures={name: _png_source(job, (drawn or {}).get(name), worker) for name, job in figures.items()},
         writers=writers,
         overwrite=overwrite,
         csv_rate_hz=traj_spec.rate_hz,

@@ -205,20 +205,24 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
     return fig
 
 
+def contact_sheet_of_scene(landmarks: LandmarkSet, scene: Scene) -> Figure:
+    """:func:`contact_sheet_figure` of the images :func:`contact_sheet_images` renders, so that a
+    worker process renders them too (a scene pickles; its ray caster is built again there)."""
+    return contact_sheet_figure(landmarks, contact_sheet_images(landmarks, scene), scene.light.saturation)
+
+
 def landmark_figures(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
     """The landmark figures by file stem: landmarks_polar, landmarks_histograms, landmarks_images,
     landmarks_cost. The fixed-zenith circle is the reference light's zenith when the reference is a
-    light; the polar plots zoom to :func:`radial_limit`. The contact sheet's images are rendered
-    here, so every job holds numbers only."""
+    light; the polar plots zoom to :func:`radial_limit`."""
     ref = scene.problem.objective.reference
     fixed = math.radians(ref.zenith_deg) if ref.kind == "light" else None
     r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed)
-    images = contact_sheet_images(landmarks, scene)
     dpi = LANDMARK_FIGURE_DPI
     return {
         "landmarks_polar": FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed), dpi),
         "landmarks_histograms": FigureJob(histograms_figure, (landmarks,), dpi),
-        "landmarks_images": FigureJob(contact_sheet_figure, (landmarks, images, scene.light.saturation), dpi),
+        "landmarks_images": FigureJob(contact_sheet_of_scene, (landmarks, scene), dpi),
         "landmarks_cost": FigureJob(cost_map_figure, (landmarks, r_max), dpi),
     }
 
