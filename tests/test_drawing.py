@@ -33,11 +33,13 @@ def test_a_worker_draws_what_this_process_draws_then_stops() -> None:
     before = set(multiprocessing.active_children())
     with FigureWorker() as worker:
         drawn = worker.draw(job).result(timeout=120)
-        assert set(multiprocessing.active_children()) - before  # the worker's own process
+        started = set(multiprocessing.active_children()) - before
+        assert len(started) == 1  # the worker's own process
         with pytest.raises(ValueError, match="math domain error"):
             worker.draw(FigureJob(math.sqrt, (-1.0,), 60)).result(timeout=120)  # raised there, seen here
     assert drawn[:8] == b"\x89PNG\r\n\x1a\n" and drawn == job.png()
     assert not set(multiprocessing.active_children()) - before
+    assert [process.exitcode for process in started] == [0]  # ended, not killed, by its shortcut exit
 
 
 def test_a_results_folder_is_the_same_with_a_worker(tmp_path: Path) -> None:
