@@ -54,7 +54,7 @@ from optlight.planning.set_landmarks import (
 )
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
-from optlight.report import landmark_jobs
+from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem
 from optlight.verify import VerificationReport, verify_trajectory
@@ -75,9 +75,9 @@ def solve(
     worker: FigureWorker | None = None,
 ) -> Plan:
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
-    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the landmark figures
-    of the results folder are drawn there once the landmarks are found, while the robot's motion is
-    planned (:attr:`Plan.figures`).
+    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the figures of the
+    results folder are drawn there while the rest is solved (:attr:`Plan.figures`): the landmark
+    figures once the landmarks are found, the motion's once it is timed.
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
@@ -134,6 +134,8 @@ def solve(
 
     with stage("timing"):
         trajectory = time_knots(setup, path, nlp.theta)
+    if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
+        figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
 
     with stage("verify"):
         report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)

@@ -233,6 +233,33 @@ def landmark_jobs(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
     return landmark_figures(landmarks, scene) if landmarks.mode != "set" else {}
 
 
+def motion_jobs(
+    setup: Setup, visited: Sequence[Landmark], knot_thetas: Array, trajectory: Trajectory
+) -> dict[str, FigureJob]:
+    """The figures of the robot's motion: ``trajectory`` (q, q̇, q̈ of the timed ``trajectory``
+    against the setup's limits) and ``path`` (the light on the sphere: at the knots' joint angles
+    ``knot_thetas`` (K, n, rad), off the sphere on the transfers; along the trajectory at 20 Hz; at
+    the ``visited`` landmarks)."""
+    robot, limits = setup.robot, setup.limits
+    timed = trajectory.sample(trajectory.sample_times(20.0))[0]
+    bounds = partial(
+        trajectory_figure,
+        lower=limits.lower,
+        upper=limits.upper,
+        velocity_limit=limits.velocity,
+        acceleration_limit=limits.acceleration,
+    )
+    positions = (
+        robot.light_positions(knot_thetas),
+        robot.light_positions(timed),
+        np.array([lm.position for lm in visited]),
+    )
+    return {
+        "trajectory": FigureJob(bounds, (trajectory,), RESULTS_DPI),
+        "path": FigureJob(path_figure, (setup.sphere, *positions), RESULTS_DPI),
+    }
+
+
 def _png_source(job: FigureJob, drawn: Future[bytes] | None, worker: FigureWorker | None) -> Callable[[], bytes]:
     """Where a figure's PNG comes from: a worker that drew it already (unless it was dropped), else
     the worker now, else this process when asked."""
@@ -271,23 +298,9 @@ def save_results(
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
-    robot, limits = setup.robot, setup.limits
-    timed = trajectory.sample(trajectory.sample_times(20.0))[0]
-    bounds = partial(
-        trajectory_figure,
-        lower=limits.lower,
-        upper=limits.upper,
-        velocity_limit=limits.velocity,
-        acceleration_limit=limits.acceleration,
-    )
-    positions = (
-        robot.light_positions(nlp.theta),  # the knots, off the sphere on the transfers
-        robot.light_positions(timed),
-        np.array([lm.position for lm in visited]),
-    )
+    robot = setup.robot
     figures = {
-        "trajectory": FigureJob(bounds, (trajectory,), RESULTS_DPI),
-        "path": FigureJob(path_figure, (setup.sphere, *positions), RESULTS_DPI),
+        **motion_jobs(setup, visited, nlp.theta, trajectory),
         **landmark_jobs(landmarks, setup.scene),
         **(extra_figures or {}),
     }

@@ -5,8 +5,9 @@ its (picklable) arguments and the PNG's resolution. :meth:`FigureJob.png` draws 
 a :class:`FigureWorker` draws it in a process of its own. Drawing is most of the time it takes to
 write a plan's results (the six figures of the default problem ~1.5 s, the rest ~1 s), and it needs
 only the plan's numbers, so the command line starts a worker before it solves (its imports take the
-idle core), hands it the landmark figures as soon as the landmarks are found (``solve(...,
-worker=)``), and the trajectory's while it writes the exports and the preview (``Plan.save``).
+idle core) and hands it the figures as soon as their numbers exist (``solve(..., worker=)``): the
+landmark figures once the landmarks are found, the trajectory and path figures once the motion is
+timed, drawn while it is verified and the exports and the preview are written (``Plan.save``).
 
 The worker is spawned, not forked: a fresh interpreter inherits none of this process's threads
 (Embree's, the ray caster's pool) or locks. It ignores Ctrl-C from its first instant, which this
