@@ -63,7 +63,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from optlight.batch import (
@@ -87,6 +86,7 @@ from optlight.spec import Problem, read_toml
 
 if TYPE_CHECKING:
     from distributed import Client
+    from matplotlib.figure import Figure
 
 Array = NDArray[np.float64]
 
@@ -643,6 +643,8 @@ def heatmap_figure(result: CellResult) -> Figure:
     a colour map, finer levels as dots, the best placement as a star, the base problem's as a cross;
     with one searched axis, the score along it. Where no placement has a clear light, the secondary
     score (lights with no robot link in the way) is shown instead."""
+    from matplotlib.figure import Figure
+
     spec = result.spec
     searched = spec.searched
     fig = Figure(figsize=(6.4, 5.2), layout="constrained")

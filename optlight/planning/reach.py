@@ -33,11 +33,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import casadi as ca
 import numpy as np
-from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.geometry import direction_in_sphere_frame
@@ -45,6 +44,9 @@ from optlight.planning.lightsets import angles_of
 from optlight.planning.policy import Reacher
 from optlight.robot import KinematicState, manipulability
 from optlight.setup import Setup
+
+if TYPE_CHECKING:  # imported where the figure is made: see optlight.viz.layout
+    from matplotlib.figure import Figure
 
 Array = NDArray[np.float64]
 
@@ -155,6 +157,8 @@ class ReachabilityMap:
         """Polar plot: manipulability per clear cell (colour), cells taken by the environment in
         grey with orange dots, unreachable cells as red crosses; ``lights`` (N, 3) unit directions
         (sphere frame) as white stars when given (a light set designed over the map)."""
+        from matplotlib.figure import Figure
+
         fig = Figure(figsize=(6.0, 5.2), layout="constrained")
         ax = fig.add_subplot(projection="polar")
         z_deg = np.rad2deg(self.zenith)

@@ -28,9 +28,10 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from matplotlib.figure import Figure
+if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
+    from matplotlib.figure import Figure
 
 
 @dataclass(frozen=True)
@@ -99,13 +100,22 @@ def _exit_now() -> None:
 
 
 #: Modules a worker imports before its first figure: those of a plan's figures (and, through them,
-#: the classes their arguments unpickle into). Named, not imported here: they import this module.
-PRELOAD = ("optlight.viz.figures", "optlight.viz.trajectory_figures")
+#: the classes their arguments unpickle into), and the matplotlib they import as they build one.
+#: Named, not imported here: the figure modules import this one.
+PRELOAD = (
+    "optlight.viz.figures",
+    "optlight.viz.trajectory_figures",
+    "matplotlib.collections",
+    "matplotlib.projections.polar",
+    "mpl_toolkits.mplot3d",
+)
 
 
 def _warm_up() -> None:
     """In the worker: import :data:`PRELOAD` and draw a small figure with text, so that the first
     real figure does not pay for the imports and the font cache."""
+    from matplotlib.figure import Figure
+
     for name in PRELOAD:
         importlib.import_module(name)
     figure = Figure(figsize=(1.0, 1.0))

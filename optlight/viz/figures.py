@@ -13,17 +13,19 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from matplotlib.colors import LogNorm
-from matplotlib.figure import Figure
-from matplotlib.projections.polar import PolarAxes
 
 from optlight.planning.landmarks import LandmarkSet
 from optlight.scene import Scene
 from optlight.viz.drawing import FigureJob
 from optlight.viz.layout import set_margins
+
+if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
+    from matplotlib.figure import Figure
+    from matplotlib.projections.polar import PolarAxes
 
 #: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
 COST_FLOOR = 1e-12
@@ -36,7 +38,7 @@ LANDMARK_FIGURE_DPI = 110
 
 
 def _polar_axes(fig: Figure, r_max: float) -> PolarAxes:
-    ax = cast(PolarAxes, fig.add_subplot(projection="polar"))
+    ax = cast("PolarAxes", fig.add_subplot(projection="polar"))
     ax.set_rlim(0.0, math.degrees(r_max))
     ax.set_rlabel_position(135)
     ax.grid(True, alpha=0.4)
@@ -66,6 +68,8 @@ def landmarks_polar_figure(landmarks: LandmarkSet, r_max: float, fixed_zenith: f
     """The landmarks projected on the plane (the paper's Fig. 1): radius = zenith (deg), angle =
     azimuth; circles for the landmarks, stars for the fixed-zenith circle at the same azimuths
     (``fixed_zenith``, rad; the paper's 10° trajectory). ``r_max`` (rad) is the radial limit."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(5.2, 5.2))
     ax = _polar_axes(fig, r_max)
     az, zen = landmarks.azimuths, np.degrees(landmarks.zeniths)
@@ -111,6 +115,8 @@ def _shade_view(ax: PolarAxes, view_zenith: float) -> None:
 def histograms_figure(landmarks: LandmarkSet, indices: Sequence[int] | None = None) -> Figure:
     """Reference against achieved soft histograms at a few landmarks (default: four spread over the
     set), bins on normalised luminance [0, 1]."""
+    from matplotlib.figure import Figure
+
     n = len(landmarks)
     if indices is None:
         indices = sorted(set(np.linspace(0, n - 1, min(4, n)).round().astype(int).tolist()))
@@ -153,6 +159,8 @@ def contact_sheet_figure(
     Drawn as images and labels on one axes spanning the figure, laid out in inches
     (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
     36 landmarks (axes, ticks, titles and the tight bounding box of each), this about 0.3 s."""
+    from matplotlib.figure import Figure
+
     n = len(landmarks)
     cols = max(1, min(columns, n))
     rows = math.ceil(n / cols)
@@ -181,6 +189,8 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
     """The coarse sweep's cost over (zenith, azimuth) as a polar heat map (radius = zenith in deg up
     to ``r_max`` (rad), logarithmic colours over five decades below the largest cost), the landmarks
     on top."""
+    from matplotlib.figure import Figure
+
     grid = landmarks.sweep
     fig = Figure(figsize=(5.8, 5.0))
     ax = _polar_axes(fig, r_max)

@@ -1,9 +1,18 @@
 """Figure layout in inches: margins and gaps fixed where ``bbox_inches="tight"`` or a layout engine
-would measure them (drawing the figure once more, ~1 s for the trajectory figure's 21 axes)."""
+would measure them (drawing the figure once more, ~1 s for the trajectory figure's 21 axes).
+
+The figure modules import :class:`matplotlib.figure.Figure` in the functions that make one, not
+at the top: ``matplotlib.figure`` (axes, text, the backends' base) takes ~0.3 s to import, and the
+command, which hands its figures to a worker process (:mod:`optlight.viz.drawing`), builds their
+jobs without ever drawing one.
+"""
 
 from __future__ import annotations
 
-from matplotlib.figure import Figure
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def set_margins(

@@ -8,17 +8,18 @@ PNG renders with Agg, so this works headless.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import cast
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
-from matplotlib.collections import LineCollection, PolyCollection
-from matplotlib.figure import Figure
-from matplotlib.projections.polar import PolarAxes
 from numpy.typing import ArrayLike
 
 from optlight.geometry import LightSphere
 from optlight.planning.timing import Trajectory
 from optlight.viz.layout import set_margins
+
+if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
+    from matplotlib.figure import Figure
+    from matplotlib.projections.polar import PolarAxes
 
 
 def trajectory_figure(
@@ -37,6 +38,9 @@ def trajectory_figure(
     as one collection each rather than an artist per dwell: for 7 joints and 36 dwells the figure
     took 3 s to build and save, most of it constrained layout measuring 21 axes and 1,500 artists;
     now 0.8 s."""
+    from matplotlib.collections import LineCollection, PolyCollection
+    from matplotlib.figure import Figure
+
     n = trajectory.dof
     lo, hi = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (lower, upper))
     vmax, amax = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (velocity_limit, acceleration_limit))
@@ -113,8 +117,10 @@ def path_figure(
     """The light's path on the sphere: planned knots, the timed trajectory's light positions and the
     landmarks (world frame, m), as a polar projection (radius = zenith in degrees, angle = azimuth) and
     a 3-D view around O."""
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(10.5, 5.0))
-    polar = cast(PolarAxes, fig.add_subplot(1, 2, 1, projection="polar"))
+    polar = cast("PolarAxes", fig.add_subplot(1, 2, 1, projection="polar"))
     points = {"planned knots": planned, "timed trajectory": timed, "landmarks": landmarks}
     styles = {
         "planned knots": {"marker": ".", "linestyle": "none", "color": "tab:blue", "markersize": 4},
