@@ -149,6 +149,15 @@ def test_the_trajectory_type_does_not_import_toppra() -> None:
     assert done.stdout.strip() == "False"
 
 
+def test_the_solving_process_does_not_import_matplotlib_figure() -> None:
+    """The command builds figure jobs and a worker draws them: its own process imports the figure
+    modules, the plan and the reachability map, but not matplotlib.figure (~0.3 s; fresh interpreter)."""
+    modules = "optlight.cli, optlight.plan, optlight.pipeline, optlight.planning.reach, optlight.cell"
+    code = f"import sys, {modules}; print('matplotlib.figure' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "False"
+
+
 def test_public_api_is_one_list() -> None:
     """``__all__`` holds every public name once; the lazy names are the ``TYPE_CHECKING`` imports of
     ``optlight/__init__.py``, and every name resolves to what its module defines."""
