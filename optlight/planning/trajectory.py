@@ -42,9 +42,9 @@ from optlight.planning.nlp import (
     Symbolic,
     arc_rows,
     environment_rows,
-    ipopt_options,
     knot_bounds,
     knot_hessian,
+    knot_nlp_options,
     light_rows,
     pin_rows,
     stacked_rows,
@@ -153,9 +153,7 @@ class TrajectoryOptimizer:
         self.view = view
         self.view_mode = view_mode
         # the exact Hessian, knot by knot (knot_hessian): the knot rows are small SX graphs
-        self.options = ipopt_options(
-            solver or SolverSpec(), ipopt__constr_viol_tol=1e-9, ipopt__hessian_approximation="exact"
-        )
+        self.options = knot_nlp_options(solver or SolverSpec(), ipopt__constr_viol_tol=1e-9)
         if mu_init is not None:
             self.options["ipopt.mu_init"] = mu_init
         self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], bool], ca.Function] = {}
@@ -527,7 +525,7 @@ def _transfer_nlp(
     weights = ca.DM(1.0 / setup.limits.velocity)
     g = ca.vec(row_function.map(inner)(x))
     cost = ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps)
-    options = ipopt_options(setup.solver, ipopt__hessian_approximation="exact")
+    options = knot_nlp_options(setup.solver)
     options["hess_lag"] = knot_hessian(
         x, ca.vec(ends), cost, g.size1(), [stacked_rows(row_function, list(range(inner)), 0)]
     )
