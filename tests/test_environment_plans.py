@@ -18,6 +18,7 @@ import optlight
 from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
 from optlight.planning.landmarks import Landmark
+from optlight.planning.nlp import knot_bounds
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.policy import Reacher, place_landmarks
 from optlight.planning.timing import Trajectory, time_parameterize
@@ -279,6 +280,24 @@ def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
     report = verify_in(free.robot, free.trajectory, problem, landmarks)
     assert report.counts["clearance"] > 0 and report.counts["view_cone"] > 0
     assert any(v.check == "clearance" and (v.joint or "").endswith("↔ wall") for v in report.violations)
+
+
+def test_a_clear_posture_at_a_relaxed_joint_bound_is_kept(small_setup: Setup) -> None:
+    """IPOPT relaxes the joint bounds (~1e-8 relative): the clear posture of this light of the
+    default face (its landmark 31, from the previous landmark's posture) sits there, and projected
+    back into the limits it puts the light 1.5e-8 m from the target. It is a clear posture, kept;
+    with a 1e-8 m tolerance it was refused and the landmark went to the placement NLP."""
+    light = np.array([0.12452190272325814, 0.12980786560125332, 0.44654155662936695])
+    start = np.array([1.0897953090108847, -1.6188833744143365, 0.8533831312972046, -3.071329036573146,
+                      -0.5881765127376188, 1.6537322689961658, 0.7788820106584369])
+    assert small_setup.environment is not None
+    found = ClearPosture(small_setup, small_setup.environment).solve(light, start)
+    assert found is not None
+    theta, row, _ = found
+    lower, upper = knot_bounds(small_setup.robot)
+    assert ((theta >= lower) & (theta <= upper)).all() and row >= CAPTURE_SLACK - CLEARANCE_TOL
+    error = float(np.linalg.norm(small_setup.robot.light_pose(theta)[0] - light))
+    assert 1e-8 < error <= POSE_TOL
 
 
 def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
