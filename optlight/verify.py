@@ -308,9 +308,10 @@ def verify_trajectory(
         skipped = ("jerk", "acceleration_continuity")
 
     # Light at the landmarks, throughout each dwell.
-    dwell_of = np.full(t.size, -1)
-    for i, (a, b) in enumerate(intervals):
-        dwell_of[(t >= a - 1e-12) & (t <= b + 1e-12)] = i
+    # the last dwell starting (less 1e-12 s) at or before each sample, when the sample is also within
+    # its end (plus 1e-12 s); t and the dwells are sorted
+    dwell_of = np.searchsorted(intervals[:, 0] - 1e-12, t, side="right") - 1
+    dwell_of[(dwell_of >= 0) & (t > intervals[np.maximum(dwell_of, 0), 1] + 1e-12)] = -1
     in_dwell = np.flatnonzero(dwell_of >= 0)
     # the planned path runs from the first capture to the last; the approach and the return (joint-space
     # transfers to and from the start configuration) are checked by the limits and the environment
@@ -321,7 +322,7 @@ def verify_trajectory(
     path_times = (t >= intervals[0, 0] - 1e-12) & (t <= intervals[-1, 1] + 1e-12) & ~off_sphere
     on_path, in_transfer = np.flatnonzero(path_times), np.flatnonzero(off_sphere)
     path_needed = planned_path is not None
-    pose_at = np.union1d(np.union1d(on_path, in_dwell) if path_needed else in_dwell, in_transfer)
+    pose_at = np.flatnonzero((path_times if path_needed else False) | (dwell_of >= 0) | off_sphere)
     positions = np.full((t.size, 3), np.nan)
     rotations = np.full((t.size, 3, 3), np.nan)
     for k in pose_at:
