@@ -168,6 +168,26 @@ def test_ray_caster_agrees_with_trimesh_and_with_itself_on_any_thread_count(
     np.testing.assert_array_equal(serial, reference)
 
 
+def test_first_hit_distances_are_the_exact_distances_to_a_box() -> None:
+    """Rays at the cube [−0.1, 0.1]³ (m) from z = −0.5 along +z at random x, y: through the cube the
+    distance is 0.4 m, outside it inf; tilted rays through the −z face hit it at 0.4 / d_z."""
+    import trimesh
+
+    caster = RayCaster(trimesh.creation.box(extents=(0.2, 0.2, 0.2)))
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(-0.2, 0.2, size=(2000, 2))
+    origins = np.c_[xy, np.full(len(xy), -0.5)]
+    inside = (np.abs(xy) < 0.0999).all(axis=1)
+    outside = (np.abs(xy) > 0.1001).any(axis=1)
+    t = caster.first_hit_distances(origins, np.tile([0.0, 0.0, 1.0], (len(xy), 1)))
+    assert inside.sum() > 400 and outside.sum() > 400
+    np.testing.assert_allclose(t[inside], 0.4, rtol=0, atol=1e-12)
+    assert np.isinf(t[outside]).all()
+    tilt = np.array([0.05, -0.03, 1.0]) / np.linalg.norm([0.05, -0.03, 1.0])
+    aimed = np.c_[rng.uniform(-0.05, 0.05, size=(200, 2)), np.full(200, -0.5)]
+    np.testing.assert_allclose(caster.first_hit_distances(aimed, np.tile(tilt, (200, 1))), 0.4 / tilt[2], atol=1e-12)
+
+
 def test_a_pickled_scene_casts_the_same_shadows(default_scene: Scene) -> None:
     import pickle
 

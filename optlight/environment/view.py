@@ -20,8 +20,9 @@ and capsules by polygons circumscribed about them, so a ray that misses the poly
 shape. The housing (``[light] housing``): a cylinder of radius r and length ℓ behind the emitting
 point, along −z of the light frame, or a ball of radius r centred r behind it.
 
-Rays are cast with Embree (trimesh + embreex) in each body's own frame, so the bodies' BVHs are built
-once: a ray o + t d in the world is R^T(o − p) + t R^T d in a body placed at (R, p).
+Rays are cast with Embree (:class:`~optlight.scene.gbuffer.RayCaster`) in each body's own frame, so
+the bodies' BVHs are built once: a ray o + t d in the world is R^T(o − p) + t R^T d in a body placed
+at (R, p). The distance to a hit comes from the hit triangle's plane, in float64.
 """
 
 from __future__ import annotations
@@ -36,10 +37,10 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 from numpy.typing import ArrayLike, NDArray
-from trimesh.ray.ray_pyembree import RayMeshIntersector
 
 from optlight.errors import RobotError
 from optlight.robot.loading import Robot
+from optlight.scene.gbuffer import RayCaster
 
 Array = NDArray[np.float64]
 
@@ -120,7 +121,7 @@ class ViewReport:
 @dataclass(frozen=True)
 class _Body:
     name: str
-    caster: RayMeshIntersector
+    caster: RayCaster
     geometry_index: int  # into the pinocchio GeometryModel; −1 for the housing (light frame)
     center: Array  # a ball holding the mesh, in the mesh's frame (m): rays far from it skip the mesh
     radius: float
@@ -131,7 +132,7 @@ class _Body:
         vertices = np.asarray(mesh.vertices, float)
         center = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
         radius = float(np.linalg.norm(vertices - center, axis=1).max())
-        return cls(name, RayMeshIntersector(mesh), geometry_index, center, radius)
+        return cls(name, RayCaster(mesh), geometry_index, center, radius)
 
 
 class ViewCheck:
@@ -267,15 +268,10 @@ def _sphere_meets_cone(w: Array, radius: float, axis: Array, alpha: float, reach
     return angle - float(np.arcsin(radius / distance)) <= alpha
 
 
-def _hit_distances(caster: RayMeshIntersector, origins: Array, directions: Array, skip_m: float) -> Array:
+def _hit_distances(caster: RayCaster, origins: Array, directions: Array, skip_m: float) -> Array:
     """Distance along each unit ray to its first hit beyond ``skip_m`` (inf where none)."""
-    out = np.full(len(origins), np.inf)
     start = origins + skip_m * directions if skip_m > 0 else origins
-    locations, index_ray, _ = caster.intersects_location(start, directions, multiple_hits=False)
-    if len(index_ray):
-        d = np.linalg.norm(locations - start[index_ray], axis=1) + skip_m
-        np.minimum.at(out, index_ray, d)
-    return out
+    return caster.first_hit_distances(start, directions) + skip_m
 
 
 def _unit(v: Array) -> tuple[Array, Array]:

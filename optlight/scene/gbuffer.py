@@ -97,6 +97,18 @@ class RayCaster:
         parts = map_slices(lambda s: self._scene.run(o[s], d[s]), len(o), _RAYS_PER_THREAD)
         return np.concatenate(parts)
 
+    def first_hit_distances(self, origins: ArrayLike, directions: ArrayLike) -> Array:
+        """Distance t (m) along each ray (origins (N, 3), unit directions (N, 3), world frame) to the
+        first triangle it hits (:meth:`first_hits`), from that triangle's plane in float64: inf for
+        a miss, or for a ray that grazes the plane."""
+        o = np.asarray(origins, float).reshape(-1, 3)
+        d = np.asarray(directions, float).reshape(-1, 3)
+        tri = self.first_hits(o, d)
+        out = np.full(len(o), np.inf)
+        hit = np.flatnonzero(tri >= 0)
+        out[hit] = _plane_distance(self.mesh, tri[hit], o[hit], d[hit])
+        return out
+
 
 def _plane_distance(mesh: Trimesh, triangles: NDArray[np.integer], origins: Array, directions: Array) -> Array:
     """Ray parameter t of the hit with each ray's triangle plane; inf where the ray grazes it."""
