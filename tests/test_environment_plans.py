@@ -104,17 +104,40 @@ def test_the_constrained_plan_clears_every_margin(constrained: optlight.Plan) ->
 
 def test_a_selection_of_clearance_rows_is_those_rows(constrained: optlight.Plan) -> None:
     """The CasADi rows selected by index against the NumPy sphere model (pinocchio) at the plan's
-    knots, and near_rows against a threshold on the same values."""
+    knots; and the (knot, row) pairs an NLP keeps (selected_rows with an active mask) are the NumPy
+    values at those pairs, knot by knot, row by row."""
+    import casadi as ca
+
+    from optlight.planning.nlp import selected_rows
+    from optlight.planning.trajectory import near_rows
+
     env, robot = constrained.setup.environment, constrained.robot
     assert env is not None
     knots = constrained.nlp.theta[::7]
-    values = np.array([env.sphere_clearance(robot, theta)[0] for theta in knots])
-    near = env.near_rows(robot, knots, 0.15)
+    values = env.clearance_values(robot, knots)
+    assert values.shape == (len(knots), len(env.clearance_labels(robot)))
+    np.testing.assert_array_equal(values[2], env.sphere_clearance(robot, knots[2])[0])
+    near = np.flatnonzero(values.min(axis=0) < 0.15)
     assert 0 < len(near) < values.shape[1]
-    assert list(near) == [i for i in range(values.shape[1]) if values[:, i].min() < 0.15]
     selected = env.clearance_function(robot, near)
     for theta, row in zip(knots, values, strict=True):
-        np.testing.assert_allclose(np.asarray(selected(theta)).ravel(), row[list(near)], atol=1e-9)
+        np.testing.assert_allclose(np.asarray(selected(theta)).ravel(), row[near], atol=1e-9)
+
+    active = near_rows(values[:, near], 0.15)
+    assert active.sum() < active.size  # some pairs are left out
+    theta = ca.MX.sym("theta", robot.n, len(knots))
+    block, rows = selected_rows(selected, theta, range(len(knots)), 5, active)
+    g = np.asarray(ca.Function("g", [theta], [block])(knots.T)).ravel()
+    np.testing.assert_allclose(g, values[:, near][active], atol=1e-9)
+    assert np.array_equal(rows.index.T[active], 5 + np.arange(active.sum())) and (rows.index.T[~active] == -1).all()
+
+
+def test_near_rows_are_those_below_the_distance_at_a_knot_or_its_neighbours() -> None:
+    from optlight.planning.trajectory import near_rows
+
+    values = np.array([[0.5, 0.01], [0.5, 0.5], [0.05, 0.5], [0.5, 0.5], [0.5, 0.5]])
+    expected = np.array([[0, 1], [1, 1], [1, 0], [1, 0], [0, 0]], bool)
+    np.testing.assert_array_equal(near_rows(values, 0.1), expected)
 
 
 def env_rows(plan: optlight.Plan) -> int:

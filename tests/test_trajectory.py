@@ -303,7 +303,7 @@ def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
     """Our Hessian of the Lagrangian (knot by knot, :func:`optlight.planning.nlp.knot_hessian`)
     against the one CasADi derives from the whole NLP, at random points and multipliers: the
     trajectory NLP with clearance and view rows (arc rows, a fixed start, a knot off the sphere) and
-    the transfer NLP."""
+    the transfer NLP, each with every row at every knot and with some (knot, row) pairs only."""
     from conftest import reduced_problem
 
     from optlight.planning import trajectory
@@ -319,18 +319,23 @@ def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
         return real(name, plugin, nlp, options)
 
     monkeypatch.setattr(trajectory.ca, "nlpsol", capture)
-    optimizer = TrajectoryOptimizer(
-        robot,
-        path_mode="arc",
-        clearance=env.clearance_function(robot, env.near_rows(robot, robot.theta_ref[None], 0.3)),
-        view=env.view_cone_function(robot),
-    )
-    optimizer._solver(12, (0, 5, 11), (6, 7), False)
-    optimizer._solver(12, (0, 5, 11), (0, 1), True)
+    values = env.clearance_values(robot, robot.theta_ref[None])[0]
+    near = np.flatnonzero(values < 0.3)
+    clearance = env.clearance_function(robot, near)
+    # every near row at every knot, then (knot, row) pairs only: the rest keep no multiplier
+    active = np.random.default_rng(3).random((12, len(near))) < 0.5
+    for mask in (None, active):
+        optimizer = TrajectoryOptimizer(
+            robot, path_mode="arc", clearance=clearance, active=mask, view=env.view_cone_function(robot)
+        )
+        optimizer._solver(12, (0, 5, 11), (6, 7), False)
+        optimizer._solver(12, (0, 5, 11), (0, 1), True)
     q = ca.MX.sym("q", robot.n)
     rows = ca.Function("rows", [q], [environment_rows(env, robot, q)])
-    trajectory._transfer_nlp(setup, rows, robot.theta_ref, robot.theta_ref + 0.3, robot.theta_ref + np.zeros((4, 1)))
-    assert len(captured) == 3
+    ends, initial = (robot.theta_ref, robot.theta_ref + 0.3), robot.theta_ref + np.zeros((4, 1))
+    trajectory._transfer_nlp(setup, rows, *ends, initial)
+    trajectory._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
+    assert len(captured) == 6
     rng = np.random.default_rng(4)
     for nlp, options in captured:
         reference = real("reference", "ipopt", nlp, {"ipopt.print_level": 0, "print_time": False})

@@ -327,7 +327,7 @@ class Environment:
         """``casadi.Function("clearance", [theta (n×1)], [c (m×1)])``, m = obstacle rows + self rows
         (:meth:`clearance_labels`): c ≥ 0 means every sphere clears every obstacle by ``margin`` and
         every self pair by ``self_margin`` (m). ``rows``: only these rows, in this order (indices
-        into the full list, e.g. :meth:`near_rows`); all by default. SX graph, common subexpressions
+        into the full list, e.g. the rows that can bind near some knots); all by default. SX graph, common subexpressions
         eliminated; built once per robot and row selection."""
         name = "clearance" if rows is None else f"clearance{tuple(int(i) for i in rows)}"
         return self._cached(robot, name, lambda: self._build_clearance(robot, rows))
@@ -341,7 +341,7 @@ class Environment:
 
     def _clearance_rows_sx(self, robot: Robot) -> tuple[ca.SX, list[ca.SX]]:
         """θ and every clearance row as an SX expression of it, built once per robot: each NLP window
-        selects its own rows (:meth:`near_rows`), and the kinematics of the spheres were most of the
+        selects its own rows, and the kinematics of the spheres were most of the
         time of building a selection's function."""
         key = id(robot)
         if key not in self._rows_sx or self._rows_sx[key][0] is not robot:
@@ -360,13 +360,14 @@ class Environment:
             self._rows_sx[key] = (robot, theta, rows)
         return self._rows_sx[key][1], self._rows_sx[key][2]
 
-    def near_rows(self, robot: Robot, thetas: ArrayLike, distance: float) -> tuple[int, ...]:
-        """The clearance rows (indices into :meth:`clearance_function`'s) below ``distance`` (m) at
-        one or more of ``thetas`` (K, n), rad: the rows that can bind near those configurations."""
-        values = np.array([self.sphere_clearance(robot, theta)[0] for theta in np.atleast_2d(thetas)])
-        if values.size == 0:
-            return ()
-        return tuple(int(i) for i in np.flatnonzero(values.min(axis=0) < distance))
+    def clearance_values(self, robot: Robot, thetas: ArrayLike) -> Array:
+        """(K, m): the clearance rows of :meth:`sphere_clearance` (m) at each of ``thetas`` (K, n),
+        rad; with no configuration, (0, m)."""
+        values = [self.sphere_clearance(robot, theta)[0] for theta in np.atleast_2d(thetas)]
+        if values:
+            return np.array(values)
+        cm = self.collision_model(robot)
+        return np.zeros((0, len(cm.obstacle_rows) + len(cm.self_rows)))
 
     def view_cone_function(self, robot: Robot) -> ca.Function:
         """``casadi.Function("view_clearance", [theta (n×1)], [v (m×1)])``: per robot sphere that can

@@ -11,7 +11,8 @@ at a*" means the same expression in every NLP:
 - :func:`arc_rows` nᵀ(a − O) (on the great circle of normal n, 1 equality) and the two wedge rows
   (n × u₀)ᵀ(a − O) ≥ 0, (u₁ × n)ᵀ(a − O) ≥ 0 (between the arc's end directions u₀, u₁);
 - :func:`environment_rows` c(θ) ≥ 0 and v(θ) ≥ 0 (m): the clearance and view rows of an
-  :class:`~optlight.environment.Environment`, built once per robot by the environment itself;
+  :class:`~optlight.environment.Environment`, built once per robot by the environment itself, and
+  :func:`selected_rows` such rows at many knots, or only the (knot, row) pairs that can bind;
 - :func:`sphere_position` a(θ, φ) on the light sphere, symbolic;
 - :func:`knot_bounds` the joint bounds of every NLP whose joint angles become knots of a trajectory.
 
@@ -121,11 +122,29 @@ class KnotRows:
     index: NDArray[np.int64]
 
 
-def stacked_rows(function: ca.Function, knots: Sequence[int], offset: int) -> KnotRows:
-    """:class:`KnotRows` of ``function`` (θ → m rows, no other input) at the angle columns
-    ``knots``, its rows stacked knot by knot in g from row ``offset`` (``ca.vec`` of its map)."""
+def selected_rows(
+    function: ca.Function,
+    theta: Symbolic,
+    knots: Sequence[int],
+    offset: int,
+    active: NDArray[np.bool_] | None = None,
+) -> tuple[Symbolic, KnotRows]:
+    """The rows of ``function`` (θ → m rows, no other input) at the columns ``knots`` of the angle
+    matrix ``theta`` (n × F) as a block of g from row ``offset``, knot by knot, and their
+    :class:`KnotRows`: every row at every knot, or only those where ``active`` (len(knots), m) is
+    True. The others are evaluated with the rest (one mapped function) but are not rows of g, so
+    IPOPT's KKT system does not carry them."""
     m = function.size1_out(0)
-    return KnotRows(function, list(knots), [], offset + np.arange(m * len(knots)).reshape(len(knots), m).T)
+    values = ca.vec(function.map(len(knots))(theta[:, list(knots)]))
+    if active is None:
+        active = np.ones((len(knots), m), bool)
+    if active.shape != (len(knots), m):
+        raise ValueError(f"active rows: shape {active.shape}, expected {(len(knots), m)}")
+    chosen = np.flatnonzero(active)  # C order over (knot, row): the order vec stacks the map in
+    index = np.full(active.shape, -1)
+    index.flat[chosen] = offset + np.arange(chosen.size)
+    block = values if chosen.size == active.size else values[chosen.tolist()]
+    return block, KnotRows(function, list(knots), [], index.T)
 
 
 def knot_hessian(
@@ -208,7 +227,7 @@ def environment_rows(
     clearance_rows: Sequence[int] | None = None,
 ) -> Symbolic:
     """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions;
-    only ``clearance_rows`` of them when given, see :meth:`Environment.near_rows`), then (``view`` and
+    only ``clearance_rows`` of them when given, e.g. those that can bind), then (``view`` and
     the view cone on) its view rows; the CasADi functions are the environment's, built once per robot
     and row selection."""
     rows = []

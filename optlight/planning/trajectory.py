@@ -47,7 +47,7 @@ from optlight.planning.nlp import (
     knot_nlp_options,
     light_rows,
     pin_rows,
-    stacked_rows,
+    selected_rows,
     tangent_basis,
 )
 from optlight.planning.path import LightPath
@@ -125,9 +125,10 @@ class TrajectoryOptimizer:
     ``robot`` provides ``symbolic_light_pose`` (CasADi θ → (a, R)), ``lower``, ``upper``,
     ``theta_ref`` and ``n``; ``joint_weights`` W (n,) weigh the joint steps (default 1);
     ``clearance`` and ``view`` are CasADi functions θ → distances (≥ 0 is safe) from
-    :class:`optlight.environment.Environment`; ``mu_init`` IPOPT's initial barrier parameter (None:
-    IPOPT's default, 0.1). Solvers are cached, so solving many paths of the same
-    size reuses one.
+    :class:`optlight.environment.Environment`; ``active`` (K, m), when given, the clearance rows that
+    are rows of the NLP at each knot of the paths it solves (K knots, m the rows of ``clearance``;
+    None: all, at every knot); ``mu_init`` IPOPT's initial barrier parameter (None: IPOPT's
+    default, 0.1). Solvers are cached, so solving many paths of the same size reuses one.
     """
 
     def __init__(
@@ -139,6 +140,7 @@ class TrajectoryOptimizer:
         posture_weight: float = POSTURE_WEIGHT,
         joint_weights: NDArray[np.float64] | None = None,
         clearance: ca.Function | None = None,
+        active: NDArray[np.bool_] | None = None,
         view: ca.Function | None = None,
         view_mode: str = "capture",
         solver: SolverSpec | None = None,
@@ -150,6 +152,7 @@ class TrajectoryOptimizer:
         self.posture_weight = float(posture_weight)
         self.joint_weights = np.ones(robot.n) if joint_weights is None else np.asarray(joint_weights, float)
         self.clearance = clearance
+        self.active = active
         self.view = view
         self.view_mode = view_mode
         # the exact Hessian, knot by knot (knot_hessian): the knot rows are small SX graphs
@@ -209,13 +212,15 @@ class TrajectoryOptimizer:
         constraints: list[Symbolic] = [ca.vec(rows) for rows, _, _ in blocks]
         offset = sum(c.size1() for c in constraints)
         environment: list[KnotRows] = []
-        if self.clearance is not None:
-            constraints.append(ca.vec(self.clearance.map(len(free))(variables)))
-            environment.append(stacked_rows(self.clearance, list(range(len(free))), offset))
-            offset += constraints[-1].size1()
-        if self.view is not None:
-            constraints.append(ca.vec(self.view.map(len(view_knots))(theta[:, view_knots])))
-            environment.append(stacked_rows(self.view, [k - int(fixed_start) for k in view_knots], offset))
+        for function, knots, active in (
+            (self.clearance, range(len(free)), self._active_at(n_knots, free)),
+            (self.view, [k - int(fixed_start) for k in view_knots], None),
+        ):
+            if function is not None:
+                block, rows = selected_rows(function, variables, knots, offset, active)
+                constraints.append(block)
+                environment.append(rows)
+                offset += block.size1()
         dtheta = theta[:, 1:] - theta[:, :-1]
         posture = theta - ca.repmat(theta_ref, 1, n_knots)
         w = ca.DM(np.sqrt(self.joint_weights))
@@ -235,6 +240,14 @@ class TrajectoryOptimizer:
         nlp = {"x": ca.vec(variables), "p": p, "f": cost, "g": g}
         return ca.nlpsol("trajectory_nlp", "ipopt", nlp, {**self.options, "hess_lag": hessian})
 
+    def _active_at(self, n_knots: int, knots: list[int]) -> NDArray[np.bool_] | None:
+        """The rows of :attr:`active` at ``knots`` of a path of ``n_knots`` knots (None: all)."""
+        if self.active is None:
+            return None
+        if self.active.shape[0] != n_knots:
+            raise ValueError(f"active clearance rows for {self.active.shape[0]} knots, the path has {n_knots}")
+        return self.active[knots]
+
     def bounds(
         self, n_knots: int, n_landmarks: int, n_off_sphere: int = 0, n_fixed: int = 0
     ) -> tuple[Array, Array]:
@@ -250,7 +263,8 @@ class TrajectoryOptimizer:
             ubg += [np.zeros(n_int), np.full(2 * n_int, np.inf)]
         rows = 0
         if self.clearance is not None:
-            rows += self.clearance.size1_out(0) * (n_knots - n_fixed)
+            active = self._active_at(n_knots, list(range(n_fixed, n_knots)))
+            rows += self.clearance.size1_out(0) * (n_knots - n_fixed) if active is None else int(active.sum())
         if self.view is not None:
             rows += self.view.size1_out(0) * (
                 (n_knots if self.view_mode == "path" else n_landmarks) - n_fixed
@@ -321,9 +335,11 @@ def knot_cost(setup: Setup, theta: Array) -> float:
 #: What an NLP solve of :func:`solve_active_rows` returns.
 _Result = TypeVar("_Result")
 
-#: Clearance rows below this (m) at some knot join the trajectory NLP (:func:`optimize_knots`) and the
-#: transfer NLP (:func:`plan_transfer`).
-ACTIVE_DISTANCE = 0.15
+#: Clearance rows below this (m) at a knot (or the next) join the trajectory NLP
+#: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. 0.15 m before the
+#: rows were chosen knot by knot: 0.1 m took half the NLP time on the obstacle problems (collision
+#: 1.1 → 0.55 s, the scaling benchmark's 144 captures among 10 obstacles 32 → 13 s).
+ACTIVE_DISTANCE = 0.1
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
 
@@ -335,10 +351,12 @@ def optimize_knots(
     the first knot kept at its ``warm`` angles with ``fixed_start``.
 
     Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits); with an
-    environment its view-cone rows join, and of its clearance rows those that can bind: the rows
-    below :data:`ACTIVE_DISTANCE` at some knot of ``warm`` (on the collision problem 95 of 210
-    rows). A row left out that the solution breaks joins, with the rows near the solution, and the
-    NLP is solved again from there; after :data:`ACTIVE_ROUNDS` such solves, the last has every row.
+    environment its view-cone rows join, and of its clearance rows those that can bind, knot by
+    knot: each row at the knots of ``warm`` where it is below :data:`ACTIVE_DISTANCE`, and at their
+    neighbours (:func:`solve_active_rows`; on the collision problem's second window 817 of its
+    57 × 210 (knot, row) pairs). A row left out that the solution breaks joins, with the rows near
+    the solution, and the NLP is solved again from there; after :data:`ACTIVE_ROUNDS` such solves,
+    the last has every row at every knot.
     Why: the exact Hessian of the clearance rows was ~80 % of the NLP's time with all rows, and
     L-BFGS did not converge in 300 iterations on the collision problem.
 
@@ -400,13 +418,15 @@ def _active_rounds(
     env = setup.environment
     solves: list[TrajectoryNLPResult] = []
 
-    def solve(rows: tuple[int, ...] | None, start: Array) -> tuple[TrajectoryNLPResult, Array | None]:
+    def solve(active: NDArray[np.bool_] | None, start: Array) -> tuple[TrajectoryNLPResult, Array | None]:
+        rows = None if active is None else np.flatnonzero(active.any(axis=0))
         optimizer = TrajectoryOptimizer(
             setup.robot,
             path_mode=setup.trajectory_spec.path,
             max_step=setup.trajectory_spec.max_step_rad,
             joint_weights=1.0 / setup.limits.velocity**2,
             clearance=env.clearance_function(setup.robot, rows) if env and env.collisions else None,
+            active=None if active is None else active[:, rows],
             view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
@@ -424,30 +444,47 @@ def _active_rounds(
 def solve_active_rows(
     setup: Setup,
     warm: Array,
-    solve: Callable[[tuple[int, ...] | None, Array], tuple[_Result, Array | None]],
+    solve: Callable[[NDArray[np.bool_] | None, Array], tuple[_Result, Array | None]],
     bound: float = 0.0,
 ) -> _Result:
-    """An NLP over knots solved with only the clearance rows that can bind: ``solve(rows, start)``
-    solves it from the knots ``start`` (K, n) with the clearance rows ``rows`` (indices into
-    :meth:`Environment.clearance_function`'s; None: all) and returns its result and its knots (None
-    when it failed). First the rows below :data:`ACTIVE_DISTANCE` at some knot of ``warm``; when the
-    solution breaks a row left out (below ``bound``, m), the broken rows and the rows near the
-    solution join, and the NLP is solved again from the solution; after :data:`ACTIVE_ROUNDS` such
-    solves, the last has every row. Without clearance rows (no environment, or no collisions
-    modelled): one solve with ``rows`` None."""
+    """An NLP over knots solved with only the clearance rows that can bind, knot by knot:
+    ``solve(active, start)`` solves it from the knots ``start`` (K, n) with the clearance row i at
+    knot k where ``active[k, i]`` ((K, m) over :meth:`Environment.clearance_function`'s rows; None:
+    every row at every knot) and returns its result and its knots (None when it failed). First the
+    rows below :data:`ACTIVE_DISTANCE` at a knot of ``warm`` or at a neighbour of it
+    (:func:`near_rows`); when the solution breaks a row left out (below ``bound``, m, at some
+    knot), those and the rows near the solution join, and the NLP is solved again from the
+    solution; after :data:`ACTIVE_ROUNDS` such solves, the last has every row at every knot.
+    Without clearance rows (no environment, or no collisions modelled): one solve with None.
+
+    Knot by knot, not one row set for all knots: a row near at some knot is far at most others (on
+    the collision problem's second window, 817 (knot, row) pairs instead of the 42 rows near
+    somewhere at each of its 57 knots, 2,394), and IPOPT's linear algebra grows with the pairs."""
     env, robot = setup.environment, setup.robot
-    rows = env.near_rows(robot, warm, ACTIVE_DISTANCE) if env is not None and env.collisions else None
+    if env is None or not env.collisions:
+        return solve(None, warm)[0]
+    active: NDArray[np.bool_] | None = near_rows(env.clearance_values(robot, warm), ACTIVE_DISTANCE)
     for round_ in range(ACTIVE_ROUNDS + 1):
-        result, theta = solve(rows, warm)
-        if env is None or rows is None or theta is None:
+        result, theta = solve(active, warm)
+        if active is None or theta is None:
             break
-        broken = set(env.near_rows(robot, theta, bound)) - set(rows)
-        if not broken:
+        values = env.clearance_values(robot, theta)
+        broken = (values < bound) & ~active
+        if not broken.any():
             break
-        near = set(env.near_rows(robot, theta, ACTIVE_DISTANCE))
-        rows = tuple(sorted(set(rows) | broken | near)) if round_ + 1 < ACTIVE_ROUNDS else None
+        active = active | broken | near_rows(values, ACTIVE_DISTANCE) if round_ + 1 < ACTIVE_ROUNDS else None
         warm = theta
     return result
+
+
+def near_rows(values: Array, distance: float) -> NDArray[np.bool_]:
+    """(K, m): the clearance rows (``values`` (K, m), m) below ``distance`` at each knot or at a
+    knot next to it: the knots move in a solve, a row's nearest approach with them."""
+    near = values < distance
+    spread = near.copy()
+    spread[1:] |= near[:-1]
+    spread[:-1] |= near[1:]
+    return spread
 
 
 #: Knots of a transfer (start → first landmark, last landmark → start) at most this far apart (rad).
@@ -488,15 +525,17 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
         return line
 
     def solve(
-        clearance_rows: tuple[int, ...] | None, initial: Array
+        active: NDArray[np.bool_] | None, initial: Array
     ) -> tuple[tuple[Array | None, str], Array | None]:
+        rows = None if active is None else np.flatnonzero(active.any(axis=0))
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
-            "transfer_rows",
-            [q],
-            [environment_rows(environment, robot, q, view=view, clearance_rows=clearance_rows)],
+            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=rows)]
         )
-        knots, status = _transfer_nlp(setup, row_function, start, goal, initial)
+        if active is not None:  # the view rows, after the clearance rows, at every knot
+            views = row_function.size1_out(0) - len(rows)
+            active = np.hstack([active[:, rows], np.ones((len(initial), views), bool)])
+        knots, status = _transfer_nlp(setup, row_function, start, goal, initial, active)
         return (knots, status), knots
 
     status = ""
@@ -513,22 +552,26 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
 
 
 def _transfer_nlp(
-    setup: Setup, row_function: ca.Function, start: Array, goal: Array, initial: Array
+    setup: Setup,
+    row_function: ca.Function,
+    start: Array,
+    goal: Array,
+    initial: Array,
+    active: NDArray[np.bool_] | None = None,
 ) -> tuple[Array | None, str]:
     """The transfer NLP of :func:`plan_transfer` over ``len(initial)`` interior knots from ``initial``
-    (rad): the interior knots (None when IPOPT fails) and IPOPT's status."""
+    (rad), the rows of ``row_function`` at every interior knot, or where ``active`` (len(initial), m)
+    is True: the interior knots (None when IPOPT fails) and IPOPT's status."""
     n, inner = setup.robot.n, len(initial)
     x = ca.MX.sym("theta", n, inner)
     ends = ca.MX.sym("ends", n, 2)
     knots = ca.horzcat(ends[:, 0], x, ends[:, 1])
     steps = knots[:, 1:] - knots[:, :-1]
     weights = ca.DM(1.0 / setup.limits.velocity)
-    g = ca.vec(row_function.map(inner)(x))
+    g, rows = selected_rows(row_function, x, range(inner), 0, active)
     cost = ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps)
     options = knot_nlp_options(setup.solver)
-    options["hess_lag"] = knot_hessian(
-        x, ca.vec(ends), cost, g.size1(), [stacked_rows(row_function, list(range(inner)), 0)]
-    )
+    options["hess_lag"] = knot_hessian(x, ca.vec(ends), cost, g.size1(), [rows])
     solver = ca.nlpsol("transfer", "ipopt", {"x": ca.vec(x), "p": ca.vec(ends), "f": cost, "g": g}, options)
     lower, upper = (np.tile(bound, inner) for bound in knot_bounds(setup.robot))
     x0 = np.clip(initial.ravel(), lower, upper)  # knot by knot, as ca.vec(x) stacks them
