@@ -188,6 +188,27 @@ def test_first_hit_distances_are_the_exact_distances_to_a_box() -> None:
     np.testing.assert_allclose(caster.first_hit_distances(aimed, np.tile(tilt, (200, 1))), 0.4 / tilt[2], atol=1e-12)
 
 
+def test_any_hits_are_the_rays_through_a_box() -> None:
+    """Rays from below the cube [−0.1, 0.1]³ (m), at random x, y and random upward directions: a ray
+    hits it iff the slab test says so (it enters all three slabs before it leaves one, t_in < t_out,
+    grazing rays within 1e-4 m left out); pointing the other way, none does."""
+    import trimesh
+
+    caster = RayCaster(trimesh.creation.box(extents=(0.2, 0.2, 0.2)))
+    rng = np.random.default_rng(6)
+    origins = np.c_[rng.uniform(-0.3, 0.3, size=(4000, 2)), np.full(4000, -0.5)]
+    directions = np.c_[rng.uniform(-0.5, 0.5, size=(4000, 2)), np.ones(4000)]
+    with np.errstate(divide="ignore"):
+        near, far = ((s * 0.1 - origins) / directions for s in (-1.0, 1.0))
+    t_in, t_out = np.minimum(near, far).max(axis=1), np.maximum(near, far).min(axis=1)
+    length = np.linalg.norm(directions, axis=1)
+    through, beside = (t_out - t_in) * length > 1e-4, (t_in - t_out) * length > 1e-4
+    hits = caster.any_hits(origins, directions)
+    assert through.sum() > 400 and beside.sum() > 400
+    assert hits[through].all() and not hits[beside].any()
+    assert not caster.any_hits(origins, -directions).any()
+
+
 def test_a_pickled_scene_casts_the_same_shadows(default_scene: Scene) -> None:
     import pickle
 
