@@ -227,17 +227,14 @@ def check_configurations(
         k, size = k + int(rows[0]), 1
         todo = np.flatnonzero(due[rows[0]])
         pin.updateGeometryPlacements(robot.model, robot.data, geom, gdata, robot.to_pin(theta[k]))
+        placed: dict[int, coal.Transform3s] = {}  # once per geometry and sample: most are in several pairs
         for p in todo:
             a, b = int(first[p]), int(second[p])
+            for g in (a, b):
+                if g not in placed:
+                    placed[g] = _transform(gdata.oMg[g])
             res = coal.DistanceResult()
-            d = coal.distance(
-                objects[a].geometry,
-                _transform(gdata.oMg[a]),
-                objects[b].geometry,
-                _transform(gdata.oMg[b]),
-                req,
-                res,
-            )
+            d = coal.distance(objects[a].geometry, placed[a], objects[b].geometry, placed[b], req, res)
             evaluations[p] += 1
             last_d[p], last_theta[p] = d, theta[k]
             if d < best[p]:
