@@ -335,7 +335,7 @@ def knot_cost(setup: Setup, theta: Array) -> float:
 #: What an NLP solve of :func:`solve_active_rows` returns.
 _Result = TypeVar("_Result")
 
-#: Clearance rows below this (m) at a knot (or the next) join the trajectory NLP
+#: Clearance rows below this (m) at a knot (or at one next to it) join the trajectory NLP
 #: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. 0.15 m before the
 #: rows were chosen knot by knot: 0.1 m took half the NLP time on the obstacle problems (collision
 #: 1.1 → 0.55 s, the scaling benchmark's 144 captures among 10 obstacles 32 → 13 s).
@@ -419,7 +419,7 @@ def _active_rounds(
     solves: list[TrajectoryNLPResult] = []
 
     def solve(active: NDArray[np.bool_] | None, start: Array) -> tuple[TrajectoryNLPResult, Array | None]:
-        rows = None if active is None else np.flatnonzero(active.any(axis=0))
+        rows = None if active is None else _rows_of(active)
         optimizer = TrajectoryOptimizer(
             setup.robot,
             path_mode=setup.trajectory_spec.path,
@@ -477,6 +477,11 @@ def solve_active_rows(
     return result
 
 
+def _rows_of(active: NDArray[np.bool_]) -> list[int]:
+    """The clearance rows (columns of ``active`` (K, m)) that are rows of the NLP at some knot."""
+    return [int(i) for i in np.flatnonzero(active.any(axis=0))]
+
+
 def near_rows(values: Array, distance: float) -> NDArray[np.bool_]:
     """(K, m): the clearance rows (``values`` (K, m), m) below ``distance`` at each knot or at a
     knot next to it: the knots move in a solve, a row's nearest approach with them."""
@@ -527,12 +532,12 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     def solve(
         active: NDArray[np.bool_] | None, initial: Array
     ) -> tuple[tuple[Array | None, str], Array | None]:
-        rows = None if active is None else np.flatnonzero(active.any(axis=0))
+        rows = None if active is None else _rows_of(active)
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
             "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=rows)]
         )
-        if active is not None:  # the view rows, after the clearance rows, at every knot
+        if active is not None and rows is not None:  # the view rows, after the clearance rows, at every knot
             views = row_function.size1_out(0) - len(rows)
             active = np.hstack([active[:, rows], np.ones((len(initial), views), bool)])
         knots, status = _transfer_nlp(setup, row_function, start, goal, initial, active)
