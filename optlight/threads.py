@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -32,7 +32,7 @@ def thread_count() -> int:
 
 
 _in_pool = threading.local()
-_pools: dict[int, ThreadPoolExecutor] = {}
+_pools: dict[int | str, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
 
 
@@ -40,13 +40,15 @@ def _mark_pool_thread() -> None:
     _in_pool.flag = True
 
 
-def _pool(workers: int) -> ThreadPoolExecutor:
-    """The process's pool of ``workers`` threads, started on first use and kept. Starting the
-    threads on every call cost ~1 ms per call, as much as the rays of a 64-px search render."""
+def _pool(workers: int | str) -> ThreadPoolExecutor:
+    """The process's pool of ``workers`` threads (or, for "background", its one background thread),
+    started on first use and kept. Starting the threads on every call cost ~1 ms per call, as much
+    as the rays of a 64-px search render."""
     with _pools_lock:
         if workers not in _pools:
+            count = 1 if workers == "background" else int(workers)
             _pools[workers] = ThreadPoolExecutor(
-                workers, thread_name_prefix="optlight", initializer=_mark_pool_thread
+                count, thread_name_prefix=f"optlight_{workers}", initializer=_mark_pool_thread
             )
         return _pools[workers]
 
@@ -79,3 +81,19 @@ def map_slices(work: Callable[[slice], T], size: int, min_size: int) -> list[T]:
     rest = [_pool(parts - 1).submit(work, s) for s in slices[1:]]
     first = work(slices[0])
     return [first, *(f.result() for f in rest)]
+
+
+def in_background(work: Callable[[], T]) -> Future[T]:
+    """``work()`` started in the process's background thread, while the caller goes on with other
+    work: the next step of a loop computed during this one. The background thread works alone
+    (:func:`map_slices` does not split there), so the caller's own splits keep the pool. With
+    :func:`thread_count` 1, or called from a pool thread, ``work`` runs now, in the calling thread,
+    and the future comes back done. ``work`` must release the GIL for most of its time to pay."""
+    if thread_count() == 1 or getattr(_in_pool, "flag", False):
+        done: Future[T] = Future()
+        try:
+            done.set_result(work())
+        except BaseException as e:  # as a pool thread would: the caller meets it at .result()
+            done.set_exception(e)
+        return done
+    return _pool("background").submit(work)

@@ -1,4 +1,5 @@
-"""The work split of :mod:`optlight.threads`: order, the threads it runs on, nesting and fork."""
+"""The work split of :mod:`optlight.threads`: order, the threads it runs on, nesting and fork; the
+background thread."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import threading
 
 import pytest
 
-from optlight.threads import map_slices
+from optlight.threads import in_background, map_slices
 
 
 def _slices_and_threads(size: int) -> list[tuple[slice, int]]:
@@ -59,3 +60,32 @@ def test_a_forked_child_splits_work_on_threads_of_its_own(monkeypatch: pytest.Mo
         if child.is_alive():
             child.kill()
     assert child.exitcode == 0
+
+
+def test_background_work_runs_beside_the_caller_and_splits_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    release = threading.Event()
+
+    def work() -> tuple[int, list[slice]]:
+        assert release.wait(timeout=20.0)  # the caller goes on meanwhile, or this never ends
+        return threading.get_ident(), [s for s, _ in _slices_and_threads(4)]
+
+    future = in_background(work)
+    assert not future.done()
+    release.set()
+    ident, slices = future.result(timeout=20.0)
+    assert ident != threading.get_ident()
+    assert slices == [slice(0, 4)]  # alone in its thread: the caller's splits keep the pool
+    assert [s for s, _ in _slices_and_threads(4)] == [slice(0, 2), slice(2, 4)]  # and the caller's do split
+
+
+def test_background_work_with_one_thread_runs_now_and_keeps_its_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    future = in_background(threading.get_ident)
+    assert future.done() and future.result() == threading.get_ident()
+
+    def fail() -> None:
+        raise ValueError("in the background")
+
+    with pytest.raises(ValueError, match="in the background"):
+        in_background(fail).result()

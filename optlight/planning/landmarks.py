@@ -56,6 +56,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Literal
 
 import casadi as ca
@@ -70,6 +71,7 @@ from optlight.planning.nlp import Solve, ipopt_options, run, sphere_position
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.spec import SolverSpec
+from optlight.threads import in_background
 
 Array = NDArray[np.float64]
 Progress = Callable[[int, int], None]
@@ -97,7 +99,8 @@ class Landmark:
     scipy's message for the zenith search of azimuth mode; of the first solve when the sweep won; ""
     when no solve ran). ``iterations``: over all solves of this landmark, IPOPT iterations (free
     mode) or objective evaluations of the zenith search (azimuth mode).
-    ``time_s``: wall time of this landmark's own work (azimuth mode: its sweep included; free mode:
+    ``time_s``: wall time of this landmark's own work (azimuth mode: from the previous landmark's
+    end, the wait for its sweep included, which ran during the previous one's refinement; free mode:
     its refinement, the shared 2-D sweep excluded)."""
 
     index: int
@@ -519,9 +522,18 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
     costs = np.empty((spec.count, zenith.size))
     landmarks: list[Landmark] = []
     histograms: list[Array] = []
+
+    def sweep(j: int) -> tuple[Array, Array]:
+        return _sweep_azimuth(search.search, search.search_objective, zenith, float(azimuth[j]))
+
+    # the next azimuth's sweep (shadow rays, most of it) is cast while this one is refined, which
+    # leaves a core idle; the same numbers either way
+    pending = in_background(partial(sweep, 0))
+    t0 = time.perf_counter()
     for j, phi in enumerate(azimuth):
-        t0 = time.perf_counter()
-        costs[j], masks = _sweep_azimuth(search.search, search.search_objective, zenith, float(phi))
+        costs[j], masks = pending.result()
+        if j + 1 < spec.count:
+            pending = in_background(partial(sweep, j + 1))
         seeds = [
             _Candidate(float(zenith[i]), float(phi), float(costs[j, i]), "sweep")
             for i in allowed[local_minima(costs[j, allowed])]
@@ -541,6 +553,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         sample = dataclasses.replace(seeds[0], solver_status=first_status)
         best = sample if best is seeds[0] else best
         lm, hist = search.finish(j, sample, best, iterations, t0, polish=True)
+        t0 = time.perf_counter()
         landmarks.append(lm)
         histograms.append(hist)
         if progress is not None:
