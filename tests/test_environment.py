@@ -251,18 +251,6 @@ def test_a_configuration_through_the_table_is_caught(env, robot, clear_theta, ta
     assert "table" in worst.message and "t = " in worst.message
 
 
-def test_pair_distance_is_coal_distance_whatever_came_before(env, robot, clear_theta, table_theta) -> None:
-    """pinocchio's per-pair distance (the exact check's) against coal's with a fresh default request,
-    along a move into the table and back: no warm start from the previous sample may change it."""
-    cm = env.collision_model(robot)
-    s = np.linspace(0.0, 1.0, 15)[:, None]
-    path = (1 - s) * clear_theta + s * table_theta
-    for th in np.vstack([path, path[::-1]]):
-        pin.updateGeometryPlacements(robot.model, robot.data, cm.geometry, cm.geometry_data, robot.to_pin(th))
-        for p, pair in enumerate(cm.pairs):
-            assert cm.pair_distance(p).min_distance == cm.distance(pair.first, pair.second)
-
-
 def test_skipped_samples_never_hide_a_violation_or_a_near_minimum(
     env, robot, clear_theta, table_theta
 ) -> None:

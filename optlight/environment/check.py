@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import coal
 import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
@@ -207,6 +208,8 @@ def check_configurations(
     failing: list[list[tuple[int, float, Array]]] = [[] for _ in range(n_pairs)]
     is_view = kinds == "view"
     geom, gdata = model.geometry, model.geometry_data
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    objects = geom.geometryObjects
 
     k, size = 0, 1
     while k < t.size:
@@ -225,9 +228,14 @@ def check_configurations(
         k, size = k + int(rows[0]), 1
         todo = np.flatnonzero(due[rows[0]])
         pin.updateGeometryPlacements(robot.model, robot.data, geom, gdata, robot.to_pin(theta[k]))
+        placed: dict[int, coal.Transform3s] = {}  # once per geometry and sample: most are in several pairs
         for p in todo:
-            res = model.pair_distance(int(p))
-            d = res.min_distance
+            a, b = int(first[p]), int(second[p])
+            for g in (a, b):
+                if g not in placed:
+                    placed[g] = coal.Transform3s(gdata.oMg[g])  # pinocchio's converter: 0.75 µs, not 1.1
+            res.clear()  # one result, cleared: a new one costs 0.8 µs
+            d = coal.distance(objects[a].geometry, placed[a], objects[b].geometry, placed[b], req, res)
             evaluations[p] += 1
             last_d[p], last_theta[p] = d, theta[k]
             if d < best[p]:

@@ -29,7 +29,6 @@ bound of its first joint's origin and sd is 1-Lipschitz), and all sphere pairs o
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -228,7 +227,6 @@ class CollisionModel:
         if cone_id is not None:
             pairs += [Pair("view", g, cone_id, body_of[g].name, VIEW_CONE, 0.0) for g in moving]
         self.pairs = tuple(pairs)
-        self._register_pairs()
         self.motion_weights = self._motion_weights(n_robot)
 
         # Spheres, their rows.
@@ -259,32 +257,6 @@ class CollisionModel:
         ).reshape(-1, 2)
 
     # ------------------------------------------------------------------ helpers
-    def _register_pairs(self) -> None:
-        """Make :attr:`pairs` the GeometryModel's collision pairs, in order, so that
-        :meth:`pair_distance` is one pinocchio call (its C++ converts the placements; ours cost
-        2 µs per geometry in Python, most of the exact check's time). Every pair gets coal's default
-        request: pinocchio's warm-starts GJK from the pair's previous result, which moves a distance
-        by up to 0.1 mm with the order the samples come in."""
-        geom = self.geometry
-        for pair in self.pairs:
-            geom.addCollisionPair(pin.CollisionPair(pair.first, pair.second))
-        self.geometry_data = pin.GeometryData(geom)
-        default = coal.DistanceRequest()
-        with warnings.catch_warnings():
-            # coal deprecates the flag in favour of gjk_initial_guess, but still reads it (pinocchio sets it)
-            warnings.simplefilter("ignore", DeprecationWarning)
-            for request in self.geometry_data.distanceRequests:
-                request.gjk_initial_guess = default.gjk_initial_guess
-                if hasattr(request, "enable_cached_gjk_guess"):
-                    request.enable_cached_gjk_guess = False
-
-    def pair_distance(self, p: int) -> coal.DistanceResult:
-        """coal's distance result for pair ``p`` of :attr:`pairs` at the current placements
-        (``pin.updateGeometryPlacements`` on :attr:`geometry_data`): ``min_distance`` (m, < 0 in
-        contact) and the nearest points. The result is pinocchio's, overwritten by the pair's next
-        call."""
-        return pin.computeDistance(self.geometry, self.geometry_data, p)
-
     def distance(self, a: int, b: int) -> float:
         """coal distance (m, < 0 in contact) between geometry objects a and b at the current placements."""
         req, res = coal.DistanceRequest(), coal.DistanceResult()
