@@ -18,7 +18,7 @@ import optlight
 from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
 from optlight.planning.landmarks import Landmark
-from optlight.planning.nlp import knot_bounds
+from optlight.planning.nlp import knot_bounds, run, tangent_basis
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.policy import Reacher, place_landmarks
 from optlight.planning.timing import Trajectory, time_parameterize
@@ -321,6 +321,32 @@ def test_a_clear_posture_at_a_relaxed_joint_bound_is_kept(small_setup: Setup) ->
     assert ((theta >= lower) & (theta <= upper)).all() and row >= CAPTURE_SLACK - CLEARANCE_TOL
     error = float(np.linalg.norm(small_setup.robot.light_pose(theta)[0] - light))
     assert 1e-8 < error <= POSE_TOL
+
+
+def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
+    """table_wall, the IK's arm in the wall (zenith 30°, azimuth 0°): ClearPosture solves with the
+    clearance rows near θ₀ (and more if its solution breaks one left out); its posture is the one
+    the NLP with every row finds, and every row holds there."""
+    setup = Setup.from_problem(reduced("table_wall"))
+    robot, sphere, env = setup.robot, setup.scene.sphere, setup.environment
+    assert env is not None
+    ik = generalized_ik(robot, sphere, (math.radians(30.0), 0.0), robot.theta_ref)
+    light = sphere.position(math.radians(30.0), 0.0)
+    posture = ClearPosture(setup, env)
+    found = posture.solve(light, ik.theta)
+    assert found is not None
+    row_sets = [key for key in posture._solvers if key is not None]
+    rows = len(env.clearance_labels(robot))
+    assert row_sets and all(len(key) < rows / 2 for key in row_sets)
+
+    t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
+    nlp, lbg, ubg = posture._solver(None)
+    lower, upper = knot_bounds(robot)
+    every = run(nlp, {"x0": ik.theta, "p": np.r_[ik.theta, light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg})
+    assert every.success
+    np.testing.assert_allclose(found[0], np.clip(every.x, lower, upper), atol=1e-6)
+    clearance, view = env.sphere_clearance(robot, found[0])
+    assert min(clearance.min(), view.min()) >= CAPTURE_SLACK - CLEARANCE_TOL
 
 
 def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:

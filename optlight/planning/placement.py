@@ -61,8 +61,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
-from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -73,15 +73,19 @@ from optlight.geometry import h_residual
 from optlight.objectives import Objective
 from optlight.planning.landmarks import exact_cost
 from optlight.planning.nlp import (
+    KnotRows,
     Solve,
     environment_rows,
     ipopt_options,
     knot_bounds,
+    knot_hessian,
     light_rows,
     pin_rows,
     run,
+    selected_rows,
     tangent_basis,
 )
+from optlight.planning.trajectory import solve_active_rows
 from optlight.robot import KinematicState, generalized_ik
 from optlight.scene import Scene
 from optlight.setup import Setup
@@ -114,6 +118,9 @@ CLEARANCE_TOL = 1e-8
 #: the default face, landmark 31's, which then went to the placement NLP, 0.4 s, to end at the
 #: same light). The trajectory NLP re-solves the pose (|h| ≤ 1e-9) and verification allows 1e-6.
 POSE_TOL = 1e-7
+#: Clear-posture NLPs (one per clearance row set) kept for reuse: the scaling benchmark's 144
+#: captures among 3 obstacles used 94 row sets in 186 solves.
+SOLVERS_KEPT = 128
 #: Index of the zenith row u_z in the NLP's constraints g = [h (3), plane, side, u_z, c, v].
 ZENITH_ROW = 5
 #: The cost-scale sample: zeniths from θ_min to θ_max at each of as many azimuths (see
@@ -392,36 +399,97 @@ class ClearPosture:
 
     (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
     its view cone is on; s = :data:`~optlight.environment.CAPTURE_SLACK`). The sphere is the
-    problem's; IPOPT's iteration limit and tolerance come from ``[solver]``. Built once; :meth:`solve` checks its answer with pinocchio.
+    problem's; IPOPT's iteration limit and tolerance come from ``[solver]``. :meth:`solve` checks its
+    answer with pinocchio.
+
+    Clearance rows as the trajectory NLP takes them (:func:`~optlight.planning.trajectory.solve_active_rows`,
+    one knot): only those below :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at θ₀, more
+    when the solution breaks one left out, all in the last solve. IPOPT's time per iteration grows
+    with the rows: among the scaling benchmark's 3 obstacles ~26 of its 206 clearance rows are near
+    a posture, and the 186 clear-posture solves of its 144 captures took 3.6 s instead of 6.0 s (the
+    576 captures': 12.9 s instead of 21.8 s). One NLP per row set, built on first use and kept
+    (:data:`SOLVERS_KEPT`), with the exact Hessian of :func:`~optlight.planning.nlp.knot_hessian`:
+    an MX graph over the environment's functions, ~3 ms to build where CasADi's own expanded
+    Hessian of a row set took ~25 ms. Without clearance rows (the view cone alone, as on the default
+    face) the one NLP has every row, expanded to SX as before.
     """
 
     def __init__(self, setup: Setup, environment: Environment) -> None:
+        self.setup = setup
         self.robot = robot = setup.robot
         self._lower, self._upper = knot_bounds(robot)
         self.environment = environment
         self.sphere = sphere = setup.sphere
-        n = robot.n
-        theta = ca.MX.sym("theta", n)
-        p = ca.MX.sym("p", n + 9)
-        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
+        theta = ca.SX.sym("theta", robot.n)
+        target, t1, t2 = (ca.SX.sym(name, 3) for name in ("a_star", "t1", "t2"))
         a, rot = robot.symbolic_light_pose(theta)
-        g = ca.vertcat(
-            light_rows(a, rot, sphere.center, sphere.radius),
-            pin_rows(a, target, t1, t2),
-            environment_rows(environment, robot, theta),
+        self._pose = ca.Function(
+            "posture_pose",
+            [theta, target, t1, t2],
+            [ca.vertcat(light_rows(a, rot, sphere.center, sphere.radius), pin_rows(a, target, t1, t2))],
         )
-        self._lbg = np.r_[np.zeros(5), np.full(g.size1() - 5, CAPTURE_SLACK)]  # 5 equalities, then rows
-        self._ubg = np.r_[np.zeros(5), np.full(g.size1() - 5, np.inf)]
         # Most solves of a light the arm cannot hold clear are infeasible (rti_dome: 320 of 338):
         # IPOPT told to expect that gives up after a median 30 iterations instead of 93 (rti_dome's
         # placement 22 s -> 8 s), and the solves that succeed succeed as before (the same 18 there).
-        # expand: the graph is small (one posture), and as SX a solve takes 10–40 % less (rti_dome's
-        # reachability map, 270 solves: 5.4 s -> 3.7 s), with the same answers
-        options = ipopt_options(
-            setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes", expand=True
+        self._options = ipopt_options(
+            setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
         )
-        nlp: dict[str, Any] = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
-        self.nlp = ca.nlpsol("clear_posture", "ipopt", nlp, options)
+        self._solvers: OrderedDict[tuple[int, ...] | None, tuple[ca.Function, Array, Array]] = OrderedDict()
+
+    def _solver(self, active: NDArray[np.bool_] | None) -> tuple[ca.Function, Array, Array]:
+        """The NLP with the clearance rows ``active`` ((1, m) over the environment's clearance rows;
+        None: all of them) and the view rows, and its constraint bounds (lbg, ubg): built on first
+        use, the :data:`SOLVERS_KEPT` last used kept."""
+        key = None if active is None else tuple(int(i) for i in np.flatnonzero(active[0]))
+        if key not in self._solvers:
+            theta = ca.MX.sym("theta", self.robot.n)
+            p = ca.MX.sym("p", self.robot.n + 9)
+            nlp, rows = self._all_rows(theta, p) if active is None else self._row_set(theta, p, active)
+            lbg = np.r_[np.zeros(5), np.full(rows, CAPTURE_SLACK)]  # 5 equalities, then the rows
+            ubg = np.r_[np.zeros(5), np.full(rows, np.inf)]
+            self._solvers[key] = (nlp, lbg, ubg)
+            if len(self._solvers) > SOLVERS_KEPT:
+                self._solvers.popitem(last=False)
+        self._solvers.move_to_end(key)
+        return self._solvers[key]
+
+    def _all_rows(self, theta: ca.MX, p: ca.MX) -> tuple[ca.Function, int]:
+        """The NLP with every row, expanded to SX with CasADi's Hessian (one build, many solves:
+        10–40 % less per solve than as MX, rti_dome's reachability map 5.4 s -> 3.7 s); its
+        number of environment rows."""
+        n = self.robot.n
+        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
+        environment = environment_rows(self.environment, self.robot, theta)
+        g = ca.vertcat(self._pose(theta, target, t1, t2), environment)
+        nlp = {"x": theta, "p": p, "f": ca.sumsqr(theta - theta0), "g": g}
+        return ca.nlpsol(
+            "clear_posture", "ipopt", nlp, {**self._options, "expand": True}
+        ), environment.size1()
+
+    def _row_set(self, theta: ca.MX, p: ca.MX, active: NDArray[np.bool_]) -> tuple[ca.Function, int]:
+        """The NLP with the clearance rows ``active`` (1, m) and the view rows, as MX over the
+        environment's functions with :func:`~optlight.planning.nlp.knot_hessian` (many builds, one
+        per row set: ~3 ms each, against ~25 ms expanded with CasADi's Hessian); its number of
+        environment rows."""
+        robot, environment = self.robot, self.environment
+        n = robot.n
+        theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
+        blocks = [self._pose(theta, target, t1, t2)]
+        parts = [KnotRows(self._pose, [0], [target, t1, t2], np.arange(5)[:, None])]
+        functions: list[tuple[ca.Function, NDArray[np.bool_] | None]] = [
+            (environment.clearance_function(robot), active)
+        ]
+        if environment.view_cone is not None:
+            functions.append((environment.view_cone_function(robot), None))
+        for function, rows in functions:
+            block, part = selected_rows(function, theta, [0], sum(b.size1() for b in blocks), rows)
+            blocks.append(block)
+            parts.append(part)
+        g = ca.vertcat(*blocks)
+        cost = ca.sumsqr(theta - theta0)
+        hessian = knot_hessian(theta, p, cost, g.size1(), parts)
+        nlp = {"x": theta, "p": p, "f": cost, "g": g}
+        return ca.nlpsol("clear_posture", "ipopt", nlp, {**self._options, "hess_lag": hessian}), g.size1() - 5
 
     def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float, str] | None:
         """Clear joint angles for the light at ``target`` (m, on the sphere) nearest ``theta0`` (rad)
@@ -432,8 +500,15 @@ class ClearPosture:
         target = np.asarray(target, float)
         t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)
-        bounds = {"lbx": self._lower, "ubx": self._upper, "lbg": self._lbg, "ubg": self._ubg}
-        solved = run(self.nlp, {"x0": theta0, "p": np.r_[theta0, target, t1, t2], **bounds})
+        parameters = np.r_[theta0, target, t1, t2]
+
+        def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
+            nlp, lbg, ubg = self._solver(active)
+            bounds = {"lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
+            solved = run(nlp, {"x0": start[0], "p": parameters, **bounds})
+            return solved, solved.x[None] if solved.success else None
+
+        solved = solve_active_rows(self.setup, theta0[None], attempt, bound=CAPTURE_SLACK)
         if not solved.success:
             return None
         theta = np.clip(solved.x, self._lower, self._upper)
