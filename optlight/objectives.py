@@ -48,7 +48,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import OptlightError, ProblemError
-from optlight.threads import map_slices
 
 if TYPE_CHECKING:
     from optlight.scene import Scene
@@ -64,9 +63,14 @@ CHI2_EPS = 1e-10
 EMD_SMOOTH_ABS = 1e-4
 #: Default level ℓ (normalised luminance) of the saturation and shadow terms.
 DEFAULT_LEVELS = {"saturation": 0.98, "shadow": 0.05}
-#: Largest number of floats (S·P·K) a batched NumPy histogram works on at once: ~2 MB, so the chunk
-#: stays in cache (larger chunks measured up to 4× slower per sample).
-_BATCH_FLOATS = 250_000
+#: Largest exponent the running products of :meth:`SoftHistogram.numpy` may reach (e^600 ≈ 4e260,
+#: below the largest float64 with room for the sum over pixels): it sets how many bins one pass covers.
+_LOG_SPAN = 600.0
+#: Largest exponent a float64 ``exp`` takes without overflow, with a margin (e^709 is the largest).
+_LOG_MAX = 700.0
+#: Kernel sums one piece of :meth:`SoftHistogram.numpy` works on (rows × pixels): its arrays stay in
+#: cache (2^15 measured fastest on a 256² image and on a batch of 32 64² images).
+_PIECE = 2**15
 
 
 # --------------------------------------------------------------------------------------------
@@ -106,40 +110,69 @@ class SoftHistogram:
     def numpy(self, u: ArrayLike) -> Array:
         """Histogram(s) of ``u`` with shape (..., P) -> (..., K), each summing to 1.
 
-        Σ_p exp(−(a_p − b_k)²) with a = u/(σ√2), b = c/(σ√2), evaluated in place on pieces of at
-        most :data:`_BATCH_FLOATS` kernel values: whole rows of a batch, or pixel slices of one large
-        image (a 256² image's 29k object pixels × 32 bins in one piece ran 3× slower, out of cache).
-        The pieces are summed on the cores (:func:`optlight.threads.map_slices`; NumPy's kernels
-        release the GIL) and added up in their fixed order, so the result does not depend on the
-        thread count.
+        The kernel sums ``h̃_k = Σ_i exp(−(a_i − b_k)²)``, ``a = u/(σ√2)``, ``b_k = (k + ½)δ``,
+        ``δ = w/(σ√2)``, without a P×K table of exponentials (float64 ``exp`` is scalar code on
+        AVX2 machines, ~9 ns a value): by passes over at most ``L`` consecutive bins
+        ``k₀ … k₀+L−1`` (:meth:`_pass_sums`), with ``r_i`` the bin of the pass nearest ``a_i``,
+        ``t_i = a_i − b_{r_i}`` and ``m = k − r_i``,
+
+            exp(−(a_i − b_k)²) = v_i e_i^(k−k₀) · exp(−m²δ²),
+            v_i = exp((r_i − k₀)²δ² − (a_i − b_{k₀})²),   e_i = exp(2δ t_i),
+
+        two exponentials per pixel and pass, one product per bin and pixel, and the pixels summed
+        by their ``r_i`` (``np.bincount``) before the factor ``exp(−m²δ²)``, which depends on ``r_i``
+        only. The running product ``v_i e_i^(k−k₀)`` is the kernel value times ``exp(m²δ²)``, so
+        it stays below ``exp((L−1)²δ²)``: ``L − 1 = ⌊√(_LOG_SPAN)/δ⌋`` keeps it finite (35 bins at
+        ``sigma_bins`` = 1: one pass for 32 bins). Within 1e-13 of the direct sums relative; 3–5×
+        faster on a 64² batch and a 256² image. Pieces of :data:`_PIECE` values, rows of a batch or
+        pixel slices of one image, are summed in a fixed order.
         """
         u = np.asarray(u, float)
         batch = u.reshape(-1, u.shape[-1])
         n_rows, n_pixels = batch.shape
-        scale = math.sqrt(0.5) / self.sigma
-        a, b = batch * scale, self.centres * scale
-        rows = max(1, _BATCH_FLOATS // (n_pixels * self.bins))
-        cols = n_pixels if rows > 1 else max(1, _BATCH_FLOATS // self.bins)
-        pieces = [
-            (slice(i, i + rows), slice(j, j + cols)) for i in range(0, n_rows, rows) for j in range(0, n_pixels, cols)
-        ]
-
-        def kernel_sums(run: slice) -> list[Array]:
-            sums = []
-            for r, c in pieces[run]:
-                kernel = a[r, c, None] - b
-                np.square(kernel, out=kernel)
-                np.negative(kernel, out=kernel)
-                np.exp(kernel, out=kernel)
-                sums.append(kernel.sum(axis=1))
-            return sums
-
-        sums = [piece for run in map_slices(kernel_sums, len(pieces), 2) for piece in run]
+        a = batch * (math.sqrt(0.5) / self.sigma)
+        rows = max(1, _PIECE // n_pixels)
+        cols = n_pixels if rows > 1 else _PIECE
         out = np.zeros((n_rows, self.bins))
-        for (r, _), piece in zip(pieces, sums, strict=True):
-            out[r] += piece
+        for i in range(0, n_rows, rows):
+            for j in range(0, n_pixels, cols):
+                out[i : i + rows] += self._kernel_sums(a[i : i + rows, j : j + cols])
         out /= out.sum(axis=1, keepdims=True)
         return out.reshape(*u.shape[:-1], self.bins)
+
+    def _kernel_sums(self, a: Array) -> Array:
+        """``Σ_i exp(−(a_i − b_k)²)`` per row of ``a`` (n, p) -> (n, K), pass by pass."""
+        delta = math.sqrt(0.5) / self.sigma_bins
+        reach = math.sqrt(_LOG_SPAN)
+        # e_i < exp(2δ·reach) must be finite too; a kernel narrower than that (sigma_bins < 0.05)
+        # takes one bin per pass, which needs no e_i
+        span = 1 + int(reach / delta) if 2 * delta * reach < _LOG_MAX else 1
+        return np.concatenate(
+            [self._pass_sums(a, k0, min(span, self.bins - k0), delta) for k0 in range(0, self.bins, span)],
+            axis=1,
+        )
+
+    @staticmethod
+    def _pass_sums(a: Array, k0: int, length: int, delta: float) -> Array:
+        """The kernel sums of bins ``k₀ … k₀+length−1`` per row of ``a`` (n, p) -> (n, length): the
+        factorisation of :meth:`numpy`, ``g[k, row, r]`` the pixels' running products summed by
+        their nearest bin ``r`` of the pass (local index). Pixels with ``t_i² > _LOG_SPAN`` are left
+        out: their kernel values in the pass are below ``e^−600``."""
+        n = a.shape[0]
+        r = np.clip(np.floor(a / delta).astype(np.intp), k0, k0 + length - 1) - k0
+        t = a - (k0 + r + 0.5) * delta
+        near = t * t <= _LOG_SPAN
+        v = np.where(near, np.exp((r * delta) ** 2 - (a - (k0 + 0.5) * delta) ** 2), 0.0).ravel()
+        keys = (r + length * np.arange(n)[:, None]).ravel()
+        g = np.empty((length, n, length))
+        g[0] = np.bincount(keys, weights=v, minlength=n * length).reshape(n, length)
+        if length > 1:
+            e = np.exp(2 * delta * np.where(near, t, 0.0)).ravel()
+            for k in range(1, length):
+                v *= e
+                g[k] = np.bincount(keys, weights=v, minlength=n * length).reshape(n, length)
+        m = np.arange(length)
+        return np.einsum("knr,kr->nk", g, np.exp(-(((m[:, None] - m) * delta) ** 2)))
 
     def casadi(self, u: ca.MX) -> ca.MX:
         """Histogram of the column ``u`` (P×1) as a K×1 MX: one P×K kernel matrix, summed by rows."""
