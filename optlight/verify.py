@@ -325,8 +325,12 @@ def verify_trajectory(
     pose_at = np.flatnonzero((path_times if path_needed else False) | (dwell_of >= 0) | off_sphere)
     positions = np.full((t.size, 3), np.nan)
     rotations = np.full((t.size, 3, 3), np.nan)
-    for k in pose_at:
+    # a dwell's samples hold one configuration: its pose computed once (the same q, the same pose)
+    changes = pose_at[np.r_[True, (q[pose_at[1:]] != q[pose_at[:-1]]).any(axis=1)]] if pose_at.size else pose_at
+    for k in changes:
         positions[k], rotations[k] = light_pose(q[k])
+    source = changes[np.searchsorted(changes, pose_at, side="right") - 1]
+    positions[pose_at], rotations[pose_at] = positions[source], rotations[source]
     a, r = positions[in_dwell], rotations[in_dwell]
     h_norm = np.linalg.norm(h_residual(a, r, sphere.center, sphere.radius), axis=1)
     axis, to_center = r[:, :, 2], sphere.center - a

@@ -171,6 +171,31 @@ def test_light_off_the_sphere_or_off_the_landmark_fails(trajectory) -> None:
     assert check(trajectory, landmark_positions=moved).checks["landmark"].episodes == 2
 
 
+def test_a_dwell_that_drifts_is_checked_at_every_sample(trajectory) -> None:
+    # The verifier computes one pose per run of equal configurations: a dwell whose configuration
+    # creeps (zenith + 2e-3 rad/s) must still be measured at each sample, its worst distance to
+    # the landmark the one at the dwell's end.
+    start, end = trajectory.landmark_intervals[2]
+
+    class Drifting:
+        def __getattr__(self, name: str):  # noqa: ANN204 - the wrapped trajectory's other members
+            return getattr(trajectory, name)
+
+        def sample(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            q, qd, qdd = trajectory.sample(t)
+            inside = (t >= start) & (t <= end)
+            q = q.copy()
+            q[inside, 0] += 2e-3 * (t[inside] - start)
+            return q, qd, qdd
+
+    report = check(Drifting())
+    drift = 2e-3 * (end - start)
+    q_end = LANDMARKS_Q[2] + [drift, 0.0]
+    expected = np.linalg.norm(light_pose(q_end)[0] - light_pose(LANDMARKS_Q[2])[0])
+    assert report.checks["landmark"].max_value == pytest.approx(expected, rel=1e-6)
+    assert report.checks["landmark"].time_s == pytest.approx(end, abs=2e-3)
+
+
 def test_deviation_from_the_planned_path_is_reported_and_has_a_tolerance(trajectory) -> None:
     shifted = planned_path() + [0.0, 0.0, 0.01]
     report = check(trajectory, planned_path=shifted)
