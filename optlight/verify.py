@@ -514,8 +514,10 @@ def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
     if len(v) == 1 or not np.isfinite(v).all():
         return np.linalg.norm(points - v[0], axis=1) if len(v) == 1 else out
     v = _even_segments(v)
+    # a run of equal points (a dwell's) is measured once, at its first
     finite = np.flatnonzero(np.isfinite(points).all(axis=1))
-    p = points[finite]
+    first = finite[np.r_[True, (points[finite[1:]] != points[finite[:-1]]).any(axis=1)]] if finite.size else finite
+    p = points[first]
     a, d = v[:-1], np.diff(v, axis=0)
     dd = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
     bound = (cKDTree(v).query(p)[0] + math.sqrt(float(dd.max()))) * (1.0 + 1e-9) + 1e-12  # rounding
@@ -527,7 +529,8 @@ def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
         rel = np.repeat(p[s : s + _CHUNK], counts, axis=0) - a[segment]
         c = np.clip(np.einsum("ck,ck->c", rel, d[segment]) / dd[segment], 0.0, 1.0)
         distance = np.linalg.norm(rel - c[:, None] * d[segment], axis=1)
-        out[finite[s : s + _CHUNK]] = np.minimum.reduceat(distance, np.r_[0, np.cumsum(counts)[:-1]])
+        out[first[s : s + _CHUNK]] = np.minimum.reduceat(distance, np.r_[0, np.cumsum(counts)[:-1]])
+    out[finite] = out[first[np.searchsorted(first, finite, side="right") - 1]]
     return out
 
 

@@ -262,4 +262,8 @@ def test_distance_to_polyline_matches_every_segment_measured(seed: int) -> None:
     near = polyline[rng.integers(0, 400, 3000)] + rng.normal(scale=0.02, size=(3000, 3))
     far = rng.uniform(polyline.min(0) - 1.0, polyline.max(0) + 1.0, size=(500, 3))
     points = np.vstack([near, far])
-    np.testing.assert_allclose(distance_to_polyline(points, polyline), brute_force_distance(points, polyline), atol=1e-12)
+    # runs of equal points (a dwell's samples), one of them interrupted by a NaN sample
+    points = np.repeat(points, rng.integers(1, 4, len(points)), axis=0)
+    points[rng.choice(len(points), 20, replace=False)] = np.nan
+    expected = brute_force_distance(points, polyline)
+    np.testing.assert_allclose(distance_to_polyline(points, polyline), expected, atol=1e-12)
