@@ -243,11 +243,18 @@ class ViewCheck:
         for b, body in enumerate(bodies):
             m = placements[body.geometry_index]
             r, p = m.rotation, m.translation
-            if not _sphere_meets_cone(r @ body.center + p - origin, body.radius, u, alpha, reach):
+            w = r @ body.center + p - origin
+            if not _sphere_meets_cone(w, body.radius, u, alpha, reach):
                 continue
-            local_o = np.broadcast_to(r.T @ (origin - p), directions.shape)
-            local_d = directions @ r
-            hits = _hit_distances(body.caster, local_o, local_d, skip_m)
+            # only the rays whose segment (skip_m, length) passes within the body's ball can meet it
+            along = np.clip(directions @ w, skip_m, lengths)
+            gap = np.linalg.norm(w - along[:, None] * directions, axis=1)
+            near = np.flatnonzero(gap <= body.radius * (1.0 + 1e-9) + 1e-12)
+            if near.size == 0:
+                continue
+            local_o = np.broadcast_to(r.T @ (origin - p), (near.size, 3))
+            hits = np.full(lengths.size, np.inf)
+            hits[near] = _hit_distances(body.caster, local_o, directions[near] @ r, skip_m)
             closer = hits < nearest
             nearest[closer], first[closer] = hits[closer], b
         blocked = nearest < lengths - SURFACE_EPSILON_M
