@@ -201,11 +201,16 @@ class LightPlacement:
         side = ca.cos(phi) * u[0] + ca.sin(phi) * u[1]
         cost = self.cost_function(theta, p[1:])
         self.objective_scale = _objective_scale(self.search, self.search_objective)
+        # As for ClearPosture: most solves that fail are of an azimuth the arm cannot hold clear, and
+        # IPOPT told to expect that gives up sooner, out of its costly restoration phase (the scaling
+        # benchmark's 144 captures with 3 obstacles: 49 solves, 2585 -> 1245 iterations, 29 s ->
+        # 10 s, the same 33 succeeding and the same plan)
         options = ipopt_options(
             setup.solver,
             ipopt__obj_scaling_factor=self.objective_scale,
             ipopt__constr_viol_tol=CONSTRAINT_TOL,
             ipopt__acceptable_constr_viol_tol=CONSTRAINT_TOL,
+            ipopt__expect_infeasible_problem="yes",
         )
         rows = [light_rows(a, rot, sphere.center, sphere.radius), plane, side, u[2]]
         if self.environment is not None:
