@@ -326,10 +326,9 @@ def verify_trajectory(
     positions = np.full((t.size, 3), np.nan)
     rotations = np.full((t.size, 3, 3), np.nan)
     # a dwell's samples hold one configuration: its pose computed once (the same q, the same pose)
-    changes = pose_at[np.r_[True, (q[pose_at[1:]] != q[pose_at[:-1]]).any(axis=1)]] if pose_at.size else pose_at
+    changes, source = _equal_runs(q, pose_at)
     for k in changes:
         positions[k], rotations[k] = light_pose(q[k])
-    source = changes[np.searchsorted(changes, pose_at, side="right") - 1]
     positions[pose_at], rotations[pose_at] = positions[source], rotations[source]
     a, r = positions[in_dwell], rotations[in_dwell]
     h_norm = np.linalg.norm(h_residual(a, r, sphere.center, sphere.radius), axis=1)
@@ -516,7 +515,7 @@ def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
     v = _even_segments(v)
     # a run of equal points (a dwell's) is measured once, at its first
     finite = np.flatnonzero(np.isfinite(points).all(axis=1))
-    first = finite[np.r_[True, (points[finite[1:]] != points[finite[:-1]]).any(axis=1)]] if finite.size else finite
+    first, source = _equal_runs(points, finite)
     p = points[first]
     a, d = v[:-1], np.diff(v, axis=0)
     dd = np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)
@@ -530,8 +529,17 @@ def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
         c = np.clip(np.einsum("ck,ck->c", rel, d[segment]) / dd[segment], 0.0, 1.0)
         distance = np.linalg.norm(rel - c[:, None] * d[segment], axis=1)
         out[first[s : s + _CHUNK]] = np.minimum.reduceat(distance, np.r_[0, np.cumsum(counts)[:-1]])
-    out[finite] = out[first[np.searchsorted(first, finite, side="right") - 1]]
+    out[finite] = out[source]
     return out
+
+
+def _equal_runs(rows: Array, index: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The runs of equal consecutive rows among ``rows[index]`` (``index`` increasing): the index of
+    each run's first row, and for each entry of ``index`` the first row of its run."""
+    if index.size == 0:
+        return index, index
+    first = index[np.r_[True, (rows[index[1:]] != rows[index[:-1]]).any(axis=1)]]
+    return first, first[np.searchsorted(first, index, side="right") - 1]
 
 
 def _even_segments(v: Array) -> Array:
