@@ -211,6 +211,11 @@ def check_configurations(
     req, res = coal.DistanceRequest(), coal.DistanceResult()
     objects = geom.geometryObjects
 
+    # A pair is due when its certified value drops below max(threshold, min(best, threshold + band)):
+    # kept up to date where a pair's best changes rather than recomputed at every sample, and the
+    # pairs' geometries as Python ints (collision's check 0.58 -> 0.48 s, the same evaluations).
+    bound = np.maximum(threshold, np.minimum(best, trigger_band))
+    first_g, second_g = first.tolist(), second.tolist()
     k, size = 0, 1
     while k < t.size:
         # The next sample with a pair due. The certificates change only where a pair is evaluated,
@@ -219,8 +224,7 @@ def check_configurations(
         # tracked exactly is due at every sample). The same samples are evaluated as one by one.
         block = slice(k, min(k + size, t.size))
         certified = last_d - np.einsum("pn,bpn->bp", pair_weights, np.abs(theta[block, None] - last_theta))
-        active = ~is_view | capture[block, None]
-        due = active & (certified < np.maximum(threshold, np.minimum(best, trigger_band)))
+        due = (~is_view | capture[block, None]) & (certified < bound)
         rows = np.flatnonzero(due.any(axis=1))
         if rows.size == 0:
             k, size = block.stop, min(2 * size, _CERTIFY_BLOCK)
@@ -229,8 +233,8 @@ def check_configurations(
         todo = np.flatnonzero(due[rows[0]])
         pin.updateGeometryPlacements(robot.model, robot.data, geom, gdata, robot.to_pin(theta[k]))
         placed: dict[int, coal.Transform3s] = {}  # once per geometry and sample: most are in several pairs
-        for p in todo:
-            a, b = int(first[p]), int(second[p])
+        for p in todo.tolist():
+            a, b = first_g[p], second_g[p]
             for g in (a, b):
                 if g not in placed:
                     placed[g] = coal.Transform3s(gdata.oMg[g])  # pinocchio's converter: 0.75 µs, not 1.1
@@ -240,6 +244,7 @@ def check_configurations(
             last_d[p], last_theta[p] = d, theta[k]
             if d < best[p]:
                 best[p], best_k[p] = d, k
+                bound[p] = max(threshold[p], min(d, trigger_band[p]))
             if d < threshold[p]:
                 failing[p].append((k, d, np.asarray(res.getNearestPoint1(), float).copy()))
         k += 1
