@@ -197,10 +197,21 @@ def sweep_costs(
     azimuth."""
     zenith, azimuth = np.atleast_1d(np.asarray(zenith, float)), np.atleast_1d(np.asarray(azimuth, float))
     out = np.empty((azimuth.size, zenith.size))
+    # an azimuth's objective is computed in the background while the next one's shadow rays are
+    # cast (on both threads): the objective alone would leave a core idle; the same numbers either way
+    pending = None
     for j, phi in enumerate(azimuth):
-        out[j] = _sweep_azimuth(scene, objective, zenith, float(phi))[0]
+        positions = scene.sphere.position(zenith, float(phi))
+        masks = scene.visibility(positions)
+        if pending is not None:
+            out[j - 1] = pending.result()
+            if progress is not None:
+                progress(j, azimuth.size)
+        pending = in_background(partial(_sweep_objective, scene, objective, positions, masks))
+    if pending is not None:
+        out[-1] = pending.result()
         if progress is not None:
-            progress(j + 1, azimuth.size)
+            progress(azimuth.size, azimuth.size)
     return out
 
 
@@ -208,8 +219,13 @@ def _sweep_azimuth(scene: Scene, objective: Objective, zenith: Array, azimuth: f
     """The objective at the zeniths (N,) along ``azimuth`` (rad), and their visibility masks (N, P)."""
     positions = scene.sphere.position(zenith, azimuth)
     masks = scene.visibility(positions)
-    costs = objective.numpy_batch(np.stack([scene.pixels(a, v) for a, v in zip(positions, masks, strict=True)]))
-    return costs, masks
+    return _sweep_objective(scene, objective, positions, masks), masks
+
+
+def _sweep_objective(scene: Scene, objective: Objective, positions: Array, masks: Array) -> Array:
+    """The objective (N,) of the renders with the lights at ``positions`` (N, 3) and the visibility
+    ``masks`` (N, P)."""
+    return objective.numpy_batch(np.stack([scene.pixels(a, v) for a, v in zip(positions, masks, strict=True)]))
 
 
 def zenith_grid(sphere: LightSphere, step: float) -> Array:
