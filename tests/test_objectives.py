@@ -120,8 +120,8 @@ def test_soft_histogram_of_a_tiny_image_against_hand_computed_bins() -> None:
 def test_soft_histogram_agrees_with_the_kernel_matrix(bins: int, sigma_bins: float) -> None:
     # The factorised sums against Σ_p exp(−(u_p − c_k)²/2σ²) over the whole P×K matrix: one image
     # larger than a piece (split by pixels) and a batch split by rows with a short last piece, with
-    # luminances a little outside [0, 1]; from one pass over all bins (σ ≥ 0.7 bin) to several
-    # (narrower kernels) and one bin per pass (σ < 0.05 bin).
+    # luminances a little outside [0, 1]; windows of W = 27, 9, 3 and 1 bins each side of a pixel's
+    # nearest bin, one that reaches every bin (2 bins) and the nearest bin alone (σ < 0.05 bin: W = 0).
     hist = SoftHistogram(bins=bins, sigma_bins=sigma_bins)
     rng = np.random.default_rng(5)
     for shape in [(40_000,), (13, 3_000)]:
