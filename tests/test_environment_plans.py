@@ -323,6 +323,39 @@ def test_a_clear_posture_at_a_relaxed_joint_bound_is_kept(small_setup: Setup) ->
     assert 1e-8 < error <= POSE_TOL
 
 
+def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_anchor(
+    small_setup: Setup, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The light at zenith 25°, azimuth 0° of the default cell, the posture nearest θ_ref: started
+    from the IK's angles, which hold the light already, IPOPT ends on the posture it reaches from
+    θ_ref itself, in fewer iterations (6 against 41 here), and pinocchio puts the light there."""
+    import optlight.planning.placement as placement
+
+    robot, sphere, env = small_setup.robot, small_setup.sphere, small_setup.environment
+    assert env is not None
+    light = sphere.position(math.radians(25.0), 0.0)
+    ik = generalized_ik(robot, sphere, light, robot.theta_ref, restarts=False, **small_setup.ik)
+    assert ik.success
+    iterations: list[int] = []
+
+    def counted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        solved = run(*args, **kwargs)
+        iterations.append(solved.iterations)
+        return solved
+
+    monkeypatch.setattr(placement, "run", counted)
+    posture = ClearPosture(small_setup, env)
+    cold = posture.solve(light, robot.theta_ref)
+    cold_iterations = sum(iterations)
+    iterations.clear()
+    warm = posture.solve(light, robot.theta_ref, warm=ik.theta)
+    assert cold is not None and warm is not None
+    np.testing.assert_allclose(warm[0], cold[0], atol=1e-8)
+    assert sum(iterations) < cold_iterations / 2
+    assert np.linalg.norm(robot.light_pose(warm[0])[0] - light) <= POSE_TOL
+    assert warm[1] >= CAPTURE_SLACK - CLEARANCE_TOL
+
+
 def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     """table_wall, the IK's arm in the wall (zenith 30°, azimuth 0°): ClearPosture solves with the
     clearance rows near θ₀ (and more if its solution breaks one left out); its posture is the one

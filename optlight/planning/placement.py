@@ -496,15 +496,22 @@ class ClearPosture:
         nlp = {"x": theta, "p": p, "f": cost, "g": g}
         return ca.nlpsol("clear_posture", "ipopt", nlp, {**self._options, "hess_lag": hessian}), g.size1() - 5
 
-    def solve(self, target: ArrayLike, theta0: ArrayLike) -> tuple[Array, float, str] | None:
+    def solve(
+        self, target: ArrayLike, theta0: ArrayLike, warm: ArrayLike | None = None
+    ) -> tuple[Array, float, str] | None:
         """Clear joint angles for the light at ``target`` (m, on the sphere) nearest ``theta0`` (rad)
-        that IPOPT finds from ``theta0``, their smallest environment row (m) and its label; None when
-        it finds none (checked with pinocchio at θ projected into the limits, IPOPT relaxing its
-        bounds: |h|∞ and the light's distance to ``target`` ≤ :data:`POSE_TOL`, every row ≥
-        −:data:`CLEARANCE_TOL`)."""
+        that IPOPT finds from ``warm`` (rad; default ``theta0``), their smallest environment row (m)
+        and its label; None when it finds none (checked with pinocchio at θ projected into the
+        limits, IPOPT relaxing its bounds: |h|∞ and the light's distance to ``target`` ≤
+        :data:`POSE_TOL`, every row ≥ −:data:`CLEARANCE_TOL`).
+
+        A ``warm`` start that already holds the light at ``target`` (the generalized IK's angles,
+        :class:`~optlight.planning.policy.Reacher`) leaves IPOPT only the clearance to restore, not
+        the pose as well."""
         target = np.asarray(target, float)
         t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)
+        warm = theta0 if warm is None else np.asarray(warm, float)
         parameters = np.r_[theta0, target, t1, t2]
 
         def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
@@ -513,7 +520,7 @@ class ClearPosture:
             solved = run(nlp, {"x0": start[0], "p": parameters, **bounds})
             return solved, solved.x[None] if solved.success else None
 
-        solved = solve_active_rows(self.setup, theta0[None], attempt, bound=CAPTURE_SLACK)
+        solved = solve_active_rows(self.setup, warm[None], attempt, bound=CAPTURE_SLACK)
         if not solved.success:
             return None
         theta = np.clip(solved.x, self._lower, self._upper)
