@@ -7,9 +7,9 @@ For a light position a* on the sphere:
    (:meth:`Environment.worst_sphere_row`: clearance, and the view cone, a light being a capture)
    below :data:`~optlight.environment.CAPTURE_SLACK` (the trajectory NLP pins the capture, and a
    posture on a row's bound leaves it no interior there), a clear posture for the same light
-   (:class:`~optlight.planning.placement.ClearPosture`): the nearest the start, then the nearest the
-   IK's angles, both solved from the IK's angles (from the start, when the IK needed random
-   restarts): a redundant arm has other postures for one light.
+   (:class:`~optlight.planning.placement.ClearPosture`): the nearest the start, solved from the IK's
+   angles; when the IK needed random restarts, from the start, then the one nearest the IK's angles
+   (a redundant arm has other postures for one light).
 
 :class:`Reacher` does that (built once per setup; its NLPs on first need), and the reachability map
 and :func:`place_landmarks` both use it. Where no attempt gives clear angles for a landmark,
@@ -88,17 +88,24 @@ class Reacher:
             return Attempt(ik, clearance, row, ik.theta)
         if self._posture is None:
             self._posture = ClearPosture(setup, environment)
-        # Nearest the start first: a chain of landmarks keeps its posture where a clear one is near
-        # it. Both solves start from the IK's angles when the IK went there from the start, without
-        # random restarts: they hold the light already, so IPOPT has only the clearance to restore.
-        # From the start instead (default face, 57 solves) it took 1,522 iterations instead of
-        # 1,221, and on rti_dome and yale_grid it ended on postures whose plans moved the joints 34.1
-        # and 27.6 rad instead of 30.1 and 26.2 (same landmarks). A restart's angles may be on
-        # another branch of the arm (3.1 rad from θ_ref at the default cell's light at zenith 22°,
-        # azimuth 320°), where IPOPT found no clear posture and from the start it did.
-        warm = ik.theta if ik.restarts == 0 else None
-        for posture_start in (start, ik.theta):
-            found = self._posture.solve(position, posture_start, warm=warm)
+        # The posture nearest the start: a chain of landmarks keeps its posture where a clear one is
+        # near it. When the IK went to the light from the start without random restarts, one solve
+        # from the IK's angles: they hold the light already, so IPOPT has only the clearance to
+        # restore. From the start instead (default face, 57 solves) it took 1,522 iterations instead
+        # of 1,221, and on rti_dome and yale_grid it ended on postures whose plans moved the joints
+        # 34.1 and 27.6 rad instead of 30.1 and 26.2 (same landmarks). A second solve, nearest the
+        # IK's angles, would have the same rows and the same starting point: on eight problems it
+        # never succeeded where that one had failed (0 of 299, 0.9 s of rti_dome's placement). A
+        # restart's angles may be on another branch of the arm (3.1 rad from θ_ref at the default
+        # cell's light at zenith 22°, azimuth 320°), where IPOPT found no clear posture and from the
+        # start it did: then from the start, and failing that from the IK's angles.
+        tries: list[tuple[Array, Array | None]]
+        if ik.restarts == 0:
+            tries = [(start, ik.theta)]
+        else:
+            tries = [(start, None), (ik.theta, None)]
+        for anchor, warm in tries:
+            found = self._posture.solve(position, anchor, warm=warm)
             if found is not None:
                 return Attempt(ik, found[1], found[2], found[0])
         return Attempt(ik, clearance, row, None)
