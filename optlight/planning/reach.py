@@ -11,9 +11,10 @@ model of the environment (:meth:`optlight.environment.Environment.sphere_clearan
 the obstacles and to each other, minus the margins, and to the camera's view cone, the light being a
 capture): every row must be ≥ 0. The IK does not see the environment, and a redundant arm has other
 joint angles for the same light, so where the IK's configuration breaks a row a small NLP looks for
-clear ones near it (:class:`optlight.planning.placement.ClearPosture`: min |θ − θ_IK|² with the light
-pinned at the cell, h(θ) = 0, c(θ) ≥ 0, v(θ) ≥ 0, joint limits; from θ_IK, then from the cell's IK
-start), the placement policy's :class:`~optlight.planning.policy.Reacher`. The chain gives each
+clear ones near it (:class:`optlight.planning.placement.ClearPosture`: min |θ − θ₀|² with the light
+pinned at the cell, h(θ) = 0, c(θ) ≥ 0, v(θ) ≥ 0, joint limits; θ₀ the cell's IK start, solved from
+θ_IK; after the IK's random restarts, from θ₀, then with θ₀ = θ_IK), the placement policy's
+:class:`~optlight.planning.policy.Reacher`. The chain gives each
 cell one start, and the posture it carries may be on an IK branch that blocks the camera where
 another branch is clear; so a cell left blocked is tried again from the posture of each clear
 neighbour, until no more cells become clear. A cell where none of these finds clear joint angles is
