@@ -249,6 +249,30 @@ def test_the_azimuth_placement_tries_the_previous_capture_last(low: Case) -> Non
     np.testing.assert_allclose(position, placed.landmarks[1].position, atol=1e-9)
 
 
+def test_a_placement_on_the_reach_boundary_is_tried_from_every_start(low: Case) -> None:
+    """Landmark 1 is out of reach and its placement NLP ends on the reach boundary: the optimum
+    where the first start's branch runs out of reach may be a local one (a camera-loop re-plan: 51.9°
+    from one start, its arm in the light's beam; 26.4° and a 3.5× lower cost from another). The
+    azimuth placement then solves from every start and keeps the cheapest success."""
+    reacher = Reacher(low.setup)
+    placement, results = reacher.placement, []
+    solve = placement.solve
+
+    def recorded(azimuth: float | None, theta0: Any) -> PlacementResult:
+        results.append(solve(azimuth, theta0))
+        return results[-1]
+
+    placement.solve = recorded  # type: ignore[method-assign]
+    first, lm = low.landmarks.landmarks[0], low.landmarks.landmarks[1]
+    placed = place_landmarks(low.setup, [first, lm], reacher)
+    assert results[0].success and results[0].on_boundary
+    assert len(results) == 3  # both IK attempts' angles, then the previous capture's
+    cheapest = min((r for r in results if r.success), key=lambda r: r.cost)
+    assert placed.landmarks[1].status == "placed"
+    assert placed.landmarks[1].cost == cheapest.cost
+    np.testing.assert_allclose(placed.thetas[1], cheapest.theta)
+
+
 def test_the_pipeline_plans_through_moved_landmarks(low: Case) -> None:
     """The whole job with the low base: the two landmarks out of reach are moved, the trajectory NLP pins
     them (kept off the singular reach boundary, where it failed) and the plan passes verification."""

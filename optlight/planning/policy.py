@@ -215,6 +215,12 @@ class AzimuthPlacement:
     landmark is replaced by the best light the robot reaches clear on that azimuth, kept off the
     singular reach boundary (status "placed", its cost).
 
+    A success on the reach boundary does not end the starts: where one start's branch of the arm runs
+    out of reach, another's may reach further, and the cheapest success is kept. Found through the
+    camera loop: the bowl's first re-plan placed a landmark at 51.9° on the boundary from one start
+    (cost 0.029, the arm in the light's beam, so the re-plan failed verification) where another
+    start gave 26.4° (cost 0.0084).
+
     When it fails from all three, the lights on the azimuth :data:`SCAN_STEP` apart, nearest the
     landmark's zenith first, are tried by the reacher from the previous capture's angles, and the
     NLP starts again from the first clear posture found. Found through the camera loop: a re-plan
@@ -235,10 +241,11 @@ class AzimuthPlacement:
         starts = [a.ik.theta for a in attempts] + [previous]
         placed = placement.solve(lm.azimuth, starts[0])
         for start in starts[1:]:
-            if placed.success:
+            if placed.success and not placed.on_boundary:
                 break
             other = placement.solve(lm.azimuth, start)
-            placed = other if other.success else placed
+            if other.success and (not placed.success or other.cost < placed.cost):
+                placed = other
         if not placed.success:
             for theta in self._clear_on_azimuth(lm, previous):
                 placed = placement.solve(lm.azimuth, theta)
