@@ -530,9 +530,19 @@ class Objective:
         """``objective(I)``: the same as :meth:`casadi`, for composing into other NLPs."""
         return self.casadi(pixels)
 
-    def histogram_of(self, pixels: ArrayLike) -> Array:
-        """Soft histogram (K,) of the compared pixels of a pixel vector (P,)."""
-        return self.histogram.numpy(self.normalise(pixels))
+    def evaluate(self, pixels: ArrayLike) -> tuple[float, Array]:
+        """Cost of one pixel vector (P,), as :meth:`numpy`, and the soft histogram (K,) of its
+        compared pixels, computed once for both: the histogram terms on the objective's own histogram
+        take their distance from it (the histogram is most of the time a cost takes)."""
+        u = self.normalise(np.asarray(pixels, float))
+        histogram = self.histogram.numpy(u)
+        cost = 0.0
+        for w, t in self.terms:
+            if isinstance(t, HistogramTerm) and t.histogram == self.histogram:
+                cost += w * float(histogram_distance_numpy(t.distance, histogram, t.reference))
+            else:
+                cost += w * float(t.numpy(u))
+        return cost, histogram
 
     @property
     def function(self) -> ca.Function:

@@ -163,6 +163,24 @@ def test_objective_weights_selection_and_twins() -> None:
         _ = objective.function  # no luminance model was given
 
 
+def test_evaluate_gives_the_cost_and_the_histogram_it_shares_with_its_terms() -> None:
+    # One histogram term on the objective's own histogram (its distance taken from the shared
+    # histogram), one on another histogram (computed by the term itself), one mean term.
+    ref_pixels, pixels = random_u(21, 50), random_u(22, 50)
+    reference = reference_from_pixels(HIST, ref_pixels, None, "synthetic")
+    other = SoftHistogram(bins=16, sigma_bins=2.0)
+    terms = [
+        (2.0, HistogramTerm(HIST, reference.histogram, "chi2")),
+        (3.0, HistogramTerm(other, other.numpy(ref_pixels), "emd")),
+        (0.5, MeanTerm(0.3)),
+    ]
+    cost, histogram = Objective(terms, reference, HIST).evaluate(pixels)
+    expected = sum(w * float(t.numpy(pixels)) for w, t in terms)
+    assert cost == pytest.approx(expected, rel=1e-14)
+    assert cost == Objective(terms, reference, HIST).numpy(pixels)
+    np.testing.assert_array_equal(histogram, HIST.numpy(pixels))
+
+
 def test_reference_bins_are_renormalised() -> None:
     ref = reference_from_bins([1.0, 3.0, 0.0, 4.0])
     np.testing.assert_allclose(ref.histogram, [0.125, 0.375, 0.0, 0.5])

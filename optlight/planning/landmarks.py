@@ -327,7 +327,7 @@ class _Candidate:
     solver_status: str = ""
 
 
-#: A candidate scored at the camera's resolution: (cost, pixels (P,), candidate).
+#: A candidate scored at the camera's resolution: (cost, soft histogram (K,), candidate).
 _Scored = tuple[float, Array, _Candidate]
 
 
@@ -388,9 +388,8 @@ class _Search:
         lo, hi = self.sphere.zenith_min, self.sphere.zenith_max
 
         def score(zenith: float) -> _Scored:
-            pixels = self.scene.pixels(self.sphere.position(zenith, azimuth), mask)
-            value = self.objective.numpy(pixels)
-            return value, pixels, _Candidate(zenith, azimuth, value, "polished", start.solver_status)
+            value, histogram = self.objective.evaluate(self.scene.pixels(self.sphere.position(zenith, azimuth), mask))
+            return value, histogram, _Candidate(zenith, azimuth, value, "polished", start.solver_status)
 
         sides = {z: score(z) for z in (theta - POLISH_STEP, theta + POLISH_STEP) if lo <= z <= hi}
         if len(sides) < 2:
@@ -412,8 +411,7 @@ class _Search:
         included, and the lowest wins."""
 
         def score(c: _Candidate, mask: Array | None = None) -> _Scored:
-            pixels = self.scene.pixels(self.sphere.position(c.zenith, c.azimuth), mask)
-            return self.objective.numpy(pixels), pixels, c
+            return (*self.objective.evaluate(self.scene.pixels(self.sphere.position(c.zenith, c.azimuth), mask)), c)
 
         if self.search is self.scene:
             scored = [score(best)]
@@ -425,7 +423,7 @@ class _Search:
                 scored.append(score(sample))
             if polish:
                 scored.extend(self.polish(best, scored[0][0], mask))
-        cost, pixels, winner = min(scored, key=lambda s: s[0])
+        cost, histogram, winner = min(scored, key=lambda s: s[0])
         azimuth = float(np.mod(winner.azimuth, 2 * np.pi))
         lm = Landmark(
             index=index,
@@ -438,7 +436,7 @@ class _Search:
             iterations=iterations,
             time_s=time.perf_counter() - t0,
         )
-        return lm, self.objective.histogram_of(pixels)
+        return lm, histogram
 
 
 def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> LandmarkSet:
