@@ -96,6 +96,24 @@ def test_never_worse_than_the_sweep(
     assert result.histograms.shape == (len(result), problem.objective.bins)
 
 
+def test_every_sweep_sample_is_the_cost_of_its_own_light(setup: Setup, result: lm_module.LandmarkSet) -> None:
+    # The pole (zenith 0), the one light every azimuth shares, is rendered by the first azimuth's
+    # sweep only: each row must still hold its cost, as it holds every other sample's. Both sweeps,
+    # azimuth mode's and free mode's (sweep_costs), against one render per light.
+    search, objective = setup.search_scene, setup.search_objective
+    grid = result.sweep
+    assert grid.zenith[0] == 0.0
+
+    def one_by_one(zenith: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+        return np.array([[exact_cost(search, objective, search.sphere.position(z, a)) for z in zenith] for a in azimuth])
+
+    np.testing.assert_allclose(grid.cost, one_by_one(grid.zenith, grid.azimuth), rtol=1e-12, atol=1e-16)
+    zenith, azimuth = grid.zenith[::3], np.radians([10.0, 100.0, 250.0])
+    np.testing.assert_allclose(
+        lm_module.sweep_costs(search, objective, zenith, azimuth), one_by_one(zenith, azimuth), rtol=1e-12, atol=1e-16
+    )
+
+
 def test_azimuth_mode_builds_no_nlp_and_reports_progress(problem: Problem, monkeypatch) -> None:
     built = []
     real = ca.nlpsol

@@ -8,7 +8,8 @@ Azimuth mode (the paper's). For ``M`` equally spaced azimuths ``φ_j = 2πj/M`` 
 light at ``a(θ, φ_j)``. ``D`` is multimodal in θ, so per azimuth:
 
 1. *sweep*: ``D`` at the zeniths ``θ_min, θ_min + Δ, …, θ_max`` (``Δ ≤ sweep_step_deg``), NumPy
-   renderer with shadow rays at every sample (one ray-caster call per azimuth);
+   renderer with shadow rays at every sample (one ray-caster call per azimuth; the pole θ = 0,
+   one light for every azimuth, rendered once);
 2. *seeds*: the ``seeds`` lowest local minima of the sweep;
 3. *refine*: per seed, a bounded Brent search (:class:`ZenithSearch`) of ``D`` over the seed's
    bracket, the zeniths between its two sweep neighbours, with the cast shadows ``v`` a fixed
@@ -197,29 +198,47 @@ def sweep_costs(
     azimuth."""
     zenith, azimuth = np.atleast_1d(np.asarray(zenith, float)), np.atleast_1d(np.asarray(azimuth, float))
     out = np.empty((azimuth.size, zenith.size))
+    pole = _has_pole(zenith) and azimuth.size > 1
     # an azimuth's objective is computed in the background while the next one's shadow rays are
     # cast (on both threads): the objective alone would leave a core idle; the same numbers either way
     pending = None
     for j, phi in enumerate(azimuth):
-        positions = scene.sphere.position(zenith, float(phi))
+        rest = zenith[1:] if pole and j else zenith  # the pole is the first azimuth's
+        positions = scene.sphere.position(rest, float(phi))
         masks = scene.visibility(positions)
         if pending is not None:
-            out[j - 1] = pending.result()
+            out[j - 1, -pending[1] :] = pending[0].result()
             if progress is not None:
                 progress(j, azimuth.size)
-        pending = in_background(partial(_sweep_objective, scene, objective, positions, masks))
+        pending = in_background(partial(_sweep_objective, scene, objective, positions, masks)), rest.size
     if pending is not None:
-        out[-1] = pending.result()
+        out[-1, -pending[1] :] = pending[0].result()
         if progress is not None:
             progress(azimuth.size, azimuth.size)
+    if pole:
+        out[1:, 0] = out[0, 0]
     return out
 
 
-def _sweep_azimuth(scene: Scene, objective: Objective, zenith: Array, azimuth: float) -> tuple[Array, Array]:
-    """The objective at the zeniths (N,) along ``azimuth`` (rad), and their visibility masks (N, P)."""
-    positions = scene.sphere.position(zenith, azimuth)
+def _has_pole(zenith: Array) -> bool:
+    """Whether the first of the (sorted) sweep zeniths is the pole, θ = 0: the one light all azimuths
+    share (a(0, φ) does not depend on φ, to the bit), which a sweep renders once."""
+    return bool(zenith.size) and zenith[0] == 0.0
+
+
+def _sweep_azimuth(
+    scene: Scene, objective: Objective, zenith: Array, azimuth: float, pole: tuple[float, Array] | None = None
+) -> tuple[Array, Array]:
+    """The objective at the zeniths (N,) along ``azimuth`` (rad), and their visibility masks (N, P);
+    ``pole`` the objective and mask of the light at ``zenith[0]`` = 0 when another azimuth's sweep
+    has them."""
+    rest = zenith[1:] if pole is not None else zenith
+    positions = scene.sphere.position(rest, azimuth)
     masks = scene.visibility(positions)
-    return _sweep_objective(scene, objective, positions, masks), masks
+    costs = _sweep_objective(scene, objective, positions, masks)
+    if pole is None:
+        return costs, masks
+    return np.r_[pole[0], costs], np.vstack([pole[1], masks])
 
 
 def _sweep_objective(scene: Scene, objective: Objective, positions: Array, masks: Array) -> Array:
@@ -537,17 +556,20 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
     landmarks: list[Landmark] = []
     histograms: list[Array] = []
 
-    def sweep(j: int) -> tuple[Array, Array]:
-        return _sweep_azimuth(search.search, search.search_objective, zenith, float(azimuth[j]))
+    def sweep(j: int, pole: tuple[float, Array] | None) -> tuple[Array, Array]:
+        return _sweep_azimuth(search.search, search.search_objective, zenith, float(azimuth[j]), pole)
 
     # the next azimuth's sweep (shadow rays, most of it) is cast while this one is refined, which
     # leaves a core idle; the same numbers either way
-    pending = in_background(partial(sweep, 0))
+    pending = in_background(partial(sweep, 0, None))
+    pole: tuple[float, Array] | None = None
     t0 = time.perf_counter()
     for j, phi in enumerate(azimuth):
         costs[j], masks = pending.result()
+        if j == 0 and _has_pole(zenith):
+            pole = (float(costs[0, 0]), masks[0])
         if j + 1 < spec.count:
-            pending = in_background(partial(sweep, j + 1))
+            pending = in_background(partial(sweep, j + 1, pole))
         seeds = [
             _Candidate(float(zenith[i]), float(phi), float(costs[j, i]), "sweep")
             for i in allowed[local_minima(costs[j, allowed])]
