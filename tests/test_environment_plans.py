@@ -382,6 +382,35 @@ def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     assert min(clearance.min(), view.min()) >= CAPTURE_SLACK - CLEARANCE_TOL
 
 
+def test_a_placement_from_the_near_rows_is_the_one_from_every_row() -> None:
+    """table_wall, the IK's arm in the wall (zenith 30°, azimuth 0°): the placement NLP solves with
+    the clearance rows near θ₀ (and more if its solution breaks one left out); its light is the one
+    the NLP with every row finds from θ₀, and every row holds at its joint angles."""
+    setup = Setup.from_problem(reduced("table_wall"))
+    robot, sphere, env = setup.robot, setup.scene.sphere, setup.environment
+    assert env is not None
+    ik = generalized_ik(robot, sphere, (math.radians(30.0), 0.0), robot.theta_ref)
+    assert env.worst_sphere_row(robot, ik.theta)[0] < -0.02  # the case: the arm in the wall
+    placement = LightPlacement(setup)
+    p = np.r_[0.0, placement.search.visibility(robot.light_pose(ik.theta)[0])]
+    lbg, ubg = placement._bounds["fixed"]
+    near = placement._run(ik.theta, p, lbg, ubg)
+    assert near.success
+    row_sets = [key for key in placement._solvers if key is not None]
+    rows = len(env.clearance_labels(robot))
+    assert row_sets and all(len(key) < rows / 2 for key in row_sets)
+
+    nlp, n_env = placement._solver(None)
+    assert n_env == rows + len(env.view_labels(robot))
+    full_lbg, full_ubg = np.r_[lbg, np.full(n_env, CAPTURE_SLACK)], np.r_[ubg, np.full(n_env, np.inf)]
+    every = placement._margined(nlp, ik.theta, p, full_lbg, full_ubg, relax=True)
+    assert every.success
+    # the light, not the angles: the arm's redundancy leaves a family of postures for one light
+    np.testing.assert_allclose(robot.light_pose(near.x)[0], robot.light_pose(every.x)[0], atol=1e-6)
+    clearance, view = env.sphere_clearance(robot, np.clip(near.x, *knot_bounds(robot)))
+    assert min(clearance.min(), view.min()) >= CAPTURE_SLACK - CLEARANCE_TOL
+
+
 def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     """table_wall: the IK's arm for the light at zenith 30°, azimuth 0° runs the elbow into the wall;
     ClearPosture finds a clear posture for the same light, and the placement NLP with the

@@ -24,20 +24,28 @@ view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
 modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
 (rows ≥ 0) starts inside its feasible set (where no light of the azimuth keeps s: on the rows'
-bounds, :meth:`LightPlacement._run`). A landmark whose light the robot only reaches by colliding or
+bounds, :meth:`LightPlacement._margined`). A landmark whose light the robot only reaches by colliding or
 blocking the camera then moves along its azimuth to the best light it reaches clear of both, exactly
 as an unreachable one does; the trajectory NLP, which pins its landmark knots, could not do that
-itself.
+itself. The clearance rows are those that can bind, as the trajectory NLP takes them
+(:func:`~optlight.planning.trajectory.solve_active_rows`, one posture): those below
+:data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at the warm start, more when the solution
+breaks one left out, all in the last solve. With L-BFGS, IPOPT's time per iteration grows with the
+rows: the scaling benchmark's obstacles give 206 clearance rows, ~26 of them near a posture, and
+its 576 captures among 3 obstacles replayed the same 98 placements from the same starts in 14.9 s
+instead of 20.2 s (61 of the 64 both solved to the same cost, one cheaper, two dearer; 69
+successes instead of 68).
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
-(−∞ ≤ g ≤ ∞): one graph and one ``nlpsol``, as :class:`~optlight.planning.landmarks.CapRefiner`
+(−∞ ≤ g ≤ ∞): one graph and one ``nlpsol`` per row set, as :class:`~optlight.planning.landmarks.CapRefiner`
 switches off its unused separation rows. A second solver would only drop two cheap rows, at the
 price of building, and keeping consistent, a second NLP.
 
 Parameters p = (φ, v): the azimuth (rad) and the cast-shadow visibility mask v (P,) at the search
 resolution. The mask is fixed during a solve: shadow rays at the warm start's light direction, and
 when the mask at the solution differs the NLP is solved once more from the solution with the mask
-there (:data:`VISIBILITY_ROUNDS`). The NLP is built once and reused for every solve.
+there (:data:`VISIBILITY_ROUNDS`). The NLP is built once per set of clearance rows (the
+objective's graph once for all) and reused for every solve.
 
 Reach boundary. When the light the objective wants is out of reach, the NLP's optimum lies on the
 boundary of the reachable set, which is a fold of the kinematics: there the 5-D light task Jacobian
@@ -118,8 +126,8 @@ CLEARANCE_TOL = 1e-8
 #: the default face, landmark 31's, which then went to the placement NLP, 0.4 s, to end at the
 #: same light). The trajectory NLP re-solves the pose (|h| ≤ 1e-9) and verification allows 1e-6.
 POSE_TOL = 1e-7
-#: Clear-posture NLPs (one per clearance row set) kept for reuse: the scaling benchmark's 144
-#: captures among 3 obstacles used 94 row sets in 186 solves.
+#: Clear-posture and placement NLPs (one per clearance row set, each) kept for reuse: the scaling
+#: benchmark's 144 captures among 3 obstacles used 94 row sets in 186 clear-posture solves.
 SOLVERS_KEPT = 128
 #: Index of the zenith row u_z in the NLP's constraints g = [h (3), plane, side, u_z, c, v].
 ZENITH_ROW = 5
@@ -164,7 +172,8 @@ class PlacementResult:
 
 
 class LightPlacement:
-    """The joint-space placement NLP of a built setup (see the module docstring), built once.
+    """The joint-space placement NLP of a built setup (see the module docstring): its objective
+    built once, one ``nlpsol`` per set of clearance rows on first use (:data:`SOLVERS_KEPT` kept).
 
     The NLP renders the setup's search scene with its search objective; reported costs use the
     camera-resolution scene and objective. The setup's environment (None when ``[environment]`` is
@@ -172,6 +181,7 @@ class LightPlacement:
     """
 
     def __init__(self, setup: Setup) -> None:
+        self.setup = setup
         self.scene = setup.scene
         self.robot = robot = setup.robot
         self._lower, self._upper = knot_bounds(robot)
@@ -199,43 +209,52 @@ class LightPlacement:
         u = ca.DM(sphere.rotation.T) @ (a - ca.DM(sphere.center)) / sphere.radius
         plane = -ca.sin(phi) * u[0] + ca.cos(phi) * u[1]
         side = ca.cos(phi) * u[0] + ca.sin(phi) * u[1]
-        cost = self.cost_function(theta, p[1:])
         self.objective_scale = _objective_scale(self.search, self.search_objective)
         # As for ClearPosture: most solves that fail are of an azimuth the arm cannot hold clear, and
         # IPOPT told to expect that gives up sooner, out of its costly restoration phase (the scaling
         # benchmark's 144 captures with 3 obstacles: 49 solves, 2585 -> 1245 iterations, 29 s ->
         # 10 s, the same 33 succeeding and the same plan)
-        options = ipopt_options(
+        self._options = ipopt_options(
             setup.solver,
             ipopt__obj_scaling_factor=self.objective_scale,
             ipopt__constr_viol_tol=CONSTRAINT_TOL,
             ipopt__acceptable_constr_viol_tol=CONSTRAINT_TOL,
             ipopt__expect_infeasible_problem="yes",
         )
-        rows = [light_rows(a, rot, sphere.center, sphere.radius), plane, side, u[2]]
-        if self.environment is not None:
-            rows.append(environment_rows(self.environment, robot, theta))
-        g = ca.vertcat(*rows)
-        n_env = g.size1() - (ZENITH_ROW + 1)
-        nlp = {"x": theta, "p": p, "f": cost, "g": g}
-        self.nlp = ca.nlpsol("light_placement", "ipopt", nlp, options)
+        self._theta, self._p = theta, p
+        self._cost = self.cost_function(theta, p[1:])
+        self._light = [light_rows(a, rot, sphere.center, sphere.radius), plane, side, u[2]]
+        self._solvers: OrderedDict[tuple[int, ...] | None, tuple[ca.Function, int]] = OrderedDict()
         # g = [h (3), plane, side, u_z, c, v]; "free" switches the two azimuth rows off through their
         # bounds; the environment rows are ≥ 0.
         # A zenith bound at the pole (θ_min = 0, θ_max = π) is implied by h = 0 and dropped: u_z ≤ 1 is
         # active there with a gradient that vanishes on the sphere, which stalls IPOPT (no LICQ).
         lo = math.cos(sphere.zenith_max) if sphere.zenith_max < math.pi else -np.inf
         hi = math.cos(sphere.zenith_min) if sphere.zenith_min > 0.0 else np.inf
-        env_lo, env_hi = np.full(n_env, CAPTURE_SLACK), np.full(n_env, np.inf)
         self._bounds = {
-            "fixed": (
-                np.r_[0.0, 0.0, 0.0, 0.0, 0.0, lo, env_lo],
-                np.r_[0.0, 0.0, 0.0, 0.0, np.inf, hi, env_hi],
-            ),
-            "free": (
-                np.r_[0.0, 0.0, 0.0, -np.inf, -np.inf, lo, env_lo],
-                np.r_[0.0, 0.0, 0.0, np.inf, np.inf, hi, env_hi],
-            ),
+            "fixed": (np.r_[0.0, 0.0, 0.0, 0.0, 0.0, lo], np.r_[0.0, 0.0, 0.0, 0.0, np.inf, hi]),
+            "free": (np.r_[0.0, 0.0, 0.0, -np.inf, -np.inf, lo], np.r_[0.0, 0.0, 0.0, np.inf, np.inf, hi]),
         }
+
+    def _solver(self, active: NDArray[np.bool_] | None) -> tuple[ca.Function, int]:
+        """The NLP with the clearance rows ``active`` ((1, m) over the environment's clearance rows;
+        None: all of them) and the view rows, and its number of environment rows: built on first
+        use (~5 ms, the objective's graph shared), the :data:`SOLVERS_KEPT` last used kept."""
+        key = None if active is None else tuple(int(i) for i in np.flatnonzero(active[0]))
+        if key not in self._solvers:
+            rows, env, theta = list(self._light), self.environment, self._theta
+            if env is not None and env.collisions:
+                clearance = env.clearance_function(self.robot)
+                rows.append(clearance(theta) if active is None else selected_rows(clearance, theta, [0], 0, active)[0])
+            if env is not None and env.view_cone is not None:
+                rows.append(env.view_cone_function(self.robot)(theta))
+            g = ca.vertcat(*rows)
+            nlp = ca.nlpsol("light_placement", "ipopt", {"x": theta, "p": self._p, "f": self._cost, "g": g}, self._options)
+            self._solvers[key] = (nlp, g.size1() - (ZENITH_ROW + 1))
+            if len(self._solvers) > SOLVERS_KEPT:
+                self._solvers.popitem(last=False)
+        self._solvers.move_to_end(key)
+        return self._solvers[key]
 
     def solve(self, azimuth: float | None, theta0: ArrayLike) -> PlacementResult:
         """The best light on the half-plane of ``azimuth`` (rad; None: anywhere on the allowed cap)
@@ -268,24 +287,44 @@ class LightPlacement:
             iterations += more
         return dataclasses.replace(best, iterations=iterations, time_s=time.perf_counter() - t0)
 
-    def _run(self, theta0: Array, p: Array, lbg: Array, ubg: Array) -> Solve:
-        """The NLP from ``theta0`` with the capture margins (joints :data:`~optlight.planning.nlp.LIMIT_MARGIN`
-        inside their limits, environment rows ≥ ``CAPTURE_SLACK``). Where IPOPT fails from ``theta0``,
-        the NLP without the margins, whose feasible set is larger, then the one with them from its
-        solution; where the margins leave no light on the azimuth (the relaxed optimum sits where a
-        row meets a joint limit: point_light's landmark 1), the relaxed solution, on its rows' bounds,
-        which the trajectory NLP (rows ≥ 0) still accepts."""
+    def _run(self, theta0: Array, p: Array, lbg: Array, ubg: Array, *, relax: bool = True) -> Solve:
+        """The NLP from ``theta0`` with the bounds ``lbg``, ``ubg`` of its first :data:`ZENITH_ROW` + 1
+        rows and the clearance rows that can bind (:func:`~optlight.planning.trajectory.solve_active_rows`,
+        one posture: those below :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at ``theta0``,
+        more when the solution breaks one left out, all in the last solve), with the iterations of
+        every solve. IPOPT's time per iteration grows with the rows (L-BFGS over ~230 of them on the
+        scaling benchmark's obstacles, of which ~26 are near a posture). Each solve is
+        :meth:`_margined`'s (``relax``: with its fallbacks)."""
+        solves: list[Solve] = []
+
+        def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
+            nlp, rows = self._solver(active)
+            full_lbg = np.r_[lbg, np.full(rows, CAPTURE_SLACK)]
+            full_ubg = np.r_[ubg, np.full(rows, np.inf)]
+            solves.append(self._margined(nlp, start[0], p, full_lbg, full_ubg, relax))
+            return solves[-1], solves[-1].x[None] if solves[-1].success else None
+
+        last = solve_active_rows(self.setup, theta0[None], attempt, bound=CAPTURE_SLACK)
+        return dataclasses.replace(last, iterations=sum(s.iterations for s in solves))
+
+    def _margined(self, nlp: ca.Function, theta0: Array, p: Array, lbg: Array, ubg: Array, relax: bool) -> Solve:
+        """``nlp`` from ``theta0`` with the capture margins (joints :data:`~optlight.planning.nlp.LIMIT_MARGIN`
+        inside their limits, environment rows ≥ ``CAPTURE_SLACK``). Where IPOPT fails from ``theta0``
+        (and ``relax``), the NLP without the margins, whose feasible set is larger, then the one with
+        them from its solution; where the margins leave no light on the azimuth (the relaxed optimum
+        sits where a row meets a joint limit: point_light's landmark 1), the relaxed solution, on its
+        rows' bounds, which the trajectory NLP (rows ≥ 0) still accepts."""
         margined = {"p": p, "lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
-        solved = run(self.nlp, {"x0": theta0, **margined})
-        if solved.success:
+        solved = run(nlp, {"x0": theta0, **margined})
+        if solved.success or not relax:
             return solved
         relaxed_lbg = lbg.copy()
         relaxed_lbg[ZENITH_ROW + 1 :] = np.minimum(relaxed_lbg[ZENITH_ROW + 1 :], 0.0)
         relaxed = {"p": p, "lbx": self.robot.lower, "ubx": self.robot.upper, "lbg": relaxed_lbg, "ubg": ubg}
-        first = run(self.nlp, {"x0": theta0, **relaxed})
+        first = run(nlp, {"x0": theta0, **relaxed})
         if not first.success:
             return dataclasses.replace(solved, iterations=solved.iterations + first.iterations)
-        second = run(self.nlp, {"x0": first.x, **margined})
+        second = run(nlp, {"x0": first.x, **margined})
         kept = second if second.success else first
         return dataclasses.replace(kept, iterations=solved.iterations + first.iterations + second.iterations)
 
@@ -377,8 +416,7 @@ class LightPlacement:
             if not ik.success:
                 continue
             lbg[ZENITH_ROW] = ubg[ZENITH_ROW] = math.cos(zenith)
-            args = {"lbx": self._lower, "ubx": self._upper, "lbg": lbg, "ubg": ubg}
-            solved = run(self.nlp, {"x0": ik.theta, "p": np.r_[azimuth, lit], **args})
+            solved = self._run(ik.theta, np.r_[azimuth, lit], lbg, ubg, relax=False)
             iterations += solved.iterations
             inside.append(self._result(solved.x, solved.success, solved.status))
         inside = [r for r in inside if r.success]
