@@ -260,10 +260,11 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
 
     _, _, path, warm = setup
     real = trajectory.TrajectoryOptimizer.solve
-    barriers = []
+    barriers, expects = [], []
 
     def fails_from_the_default_barrier(self, path_, sphere, theta0, fixed_start=False):
         barriers.append(self.options.get("ipopt.mu_init"))
+        expects.append(self.options.get("ipopt.expect_infeasible_problem"))
         result = real(self, path_, sphere, theta0, fixed_start)
         return result if barriers[-1] is not None else replace(result, success=False, status="Infeasible_Problem_Detected")
 
@@ -271,7 +272,8 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
     free = replace(small_setup, environment=None)  # the fixture's path ignores the view: no environment
     result = trajectory.optimize_knots(free, path, warm)
     assert barriers == [None, trajectory.WARM_MU_INIT] and result.success
-    alone = real(trajectory.TrajectoryOptimizer(free.robot, joint_weights=1.0 / free.limits.velocity**2, mu_init=1e-4), path, free.sphere, warm)
+    assert expects == [None, "yes"]  # the retry, not the first try, expects an infeasible problem
+    alone = real(trajectory.TrajectoryOptimizer(free.robot, joint_weights=1.0 / free.limits.velocity**2, retry=True), path, free.sphere, warm)
     assert result.iterations > alone.iterations  # both tries counted
 
 

@@ -127,8 +127,9 @@ class TrajectoryOptimizer:
     ``clearance`` and ``view`` are CasADi functions θ → distances (≥ 0 is safe) from
     :class:`optlight.environment.Environment`; ``active`` (K, m), when given, the clearance rows that
     are rows of the NLP at each knot of the paths it solves (K knots, m the rows of ``clearance``;
-    None: all, at every knot); ``mu_init`` IPOPT's initial barrier parameter (None: IPOPT's
-    default, 0.1). Solvers are cached, so solving many paths of the same size reuses one.
+    None: all, at every knot); ``retry``: the settings of :func:`optimize_knots`' second try, IPOPT's
+    initial barrier parameter :data:`WARM_MU_INIT` (instead of its default 0.1) and an infeasible
+    problem expected. Solvers are cached, so solving many paths of the same size reuses one.
     """
 
     def __init__(
@@ -144,7 +145,7 @@ class TrajectoryOptimizer:
         view: ca.Function | None = None,
         view_mode: str = "capture",
         solver: SolverSpec | None = None,
-        mu_init: float | None = None,
+        retry: bool = False,
     ) -> None:
         self.robot = robot
         self.path_mode = path_mode
@@ -157,8 +158,9 @@ class TrajectoryOptimizer:
         self.view_mode = view_mode
         # the exact Hessian, knot by knot (knot_hessian): the knot rows are small SX graphs
         self.options = knot_nlp_options(solver or SolverSpec(), ipopt__constr_viol_tol=1e-9)
-        if mu_init is not None:
-            self.options["ipopt.mu_init"] = mu_init
+        if retry:  # why these two: optimize_knots
+            self.options["ipopt.mu_init"] = WARM_MU_INIT
+            self.options["ipopt.expect_infeasible_problem"] = "yes"
         self._solvers: dict[tuple[int, tuple[int, ...], tuple[int, ...], bool], ca.Function] = {}
         self._knot_fn = knot_function(robot.symbolic_light_pose)
 
@@ -375,12 +377,19 @@ def optimize_knots(
     bowl put a capture's arm across the light's beam. Nor when the warm start is far from feasible
     (a knot on the sphere the per-knot IK missed: |h| above :data:`WARM_H_TOL`): there the small
     barrier has nothing to keep, and a path the arm cannot follow on the sphere took as long again
-    to be found infeasible (photometric_stereo: 245 more iterations, 4 s). Raises
+    to be found infeasible (photometric_stereo: 245 more iterations, 4 s). The retry also tells
+    IPOPT to expect an infeasible problem (restoration sooner, left only on a real reduction): most
+    retries that fail are windows the fallbacks of :func:`~optlight.pipeline.optimize_window` then
+    solve, and on the scaling benchmark's 576 captures among 3 obstacles its five failing retries took
+    303 iterations instead of 583 (the NLP stage 24.0 -> 21.8 s), every solve that succeeded taking the
+    same iterations to the same plan. Not the first try: there it changed face_ur5's way (83 -> 50
+    iterations) to knots that held a capture's light at the antipode of its landmark (0.8 m away:
+    the pin rows' other root on the sphere), which verification refused. Raises
     :class:`SolverError` when the solves fail.
     """
-    first = _active_rounds(setup, path, warm, fixed_start, None)
+    first = _active_rounds(setup, path, warm, fixed_start, retry=False)
     retry = not first.success and _warm_start_on_sphere(setup, path, warm)
-    nlp = _active_rounds(setup, path, warm, fixed_start, WARM_MU_INIT) if retry else first
+    nlp = _active_rounds(setup, path, warm, fixed_start, retry=True) if retry else first
     iterations = first.iterations + (0 if nlp is first else nlp.iterations)
     time_s = first.time_s + (0.0 if nlp is first else nlp.time_s)
     nlp = dataclasses.replace(nlp, iterations=iterations, time_s=time_s)
@@ -410,10 +419,10 @@ def _warm_start_on_sphere(setup: Setup, path: LightPath, warm: Array) -> bool:
 
 
 def _active_rounds(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool, mu_init: float | None
+    setup: Setup, path: LightPath, warm: Array, fixed_start: bool, retry: bool
 ) -> TrajectoryNLPResult:
     """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
-    from ``warm``, IPOPT's initial barrier parameter ``mu_init``; the last solve, with the iterations
+    from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not; the last solve, with the iterations
     and time of all."""
     env = setup.environment
     solves: list[TrajectoryNLPResult] = []
@@ -430,7 +439,7 @@ def _active_rounds(
             view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
             view_mode=env.view_mode if env else "capture",
             solver=setup.solver,
-            mu_init=mu_init,
+            retry=retry,
         )
         solves.append(optimizer.solve(path, setup.sphere, start, fixed_start))
         return solves[-1], solves[-1].theta if solves[-1].success else None
