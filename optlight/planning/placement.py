@@ -24,10 +24,10 @@ view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
 modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
 (rows ≥ 0) starts inside its feasible set (where no light of the azimuth keeps s: on the rows'
-bounds, :meth:`LightPlacement._margined`). A landmark whose light the robot only reaches by colliding or
-blocking the camera then moves along its azimuth to the best light it reaches clear of both, exactly
-as an unreachable one does; the trajectory NLP, which pins its landmark knots, could not do that
-itself. The clearance rows are those that can bind, as the trajectory NLP takes them
+bounds, :meth:`LightPlacement._margined`). A landmark whose light the robot only reaches by
+colliding or blocking the camera then moves along its azimuth to the best light it reaches clear of
+both, exactly as an unreachable one does; the trajectory NLP, which pins its landmark knots, could
+not do that itself. The clearance rows are those that can bind, as the trajectory NLP takes them
 (:func:`~optlight.planning.trajectory.solve_active_rows`, one posture): those below
 :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at the warm start, more when the solution
 breaks one left out, all in the last solve. With L-BFGS, IPOPT's time per iteration grows with the
@@ -37,8 +37,8 @@ instead of 20.2 s (61 of the 64 both solved to the same cost, one cheaper, two d
 successes instead of 68).
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
-(−∞ ≤ g ≤ ∞): one graph and one ``nlpsol`` per row set, as :class:`~optlight.planning.landmarks.CapRefiner`
-switches off its unused separation rows. A second solver would only drop two cheap rows, at the
+(−∞ ≤ g ≤ ∞): one graph and one ``nlpsol`` per row set, as
+:class:`~optlight.planning.landmarks.CapRefiner` switches off its unused separation rows. A second solver would only drop two cheap rows, at the
 price of building, and keeping consistent, a second NLP.
 
 Parameters p = (φ, v): the azimuth (rad) and the cast-shadow visibility mask v (P,) at the search

@@ -422,8 +422,8 @@ def _active_rounds(
     setup: Setup, path: LightPath, warm: Array, fixed_start: bool, retry: bool
 ) -> TrajectoryNLPResult:
     """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
-    from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not; the last solve, with the iterations
-    and time of all."""
+    from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not; the last
+    solve, with the iterations and time of all."""
     env = setup.environment
     solves: list[TrajectoryNLPResult] = []
 
