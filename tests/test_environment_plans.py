@@ -19,7 +19,7 @@ from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
 from optlight.planning.landmarks import Landmark
 from optlight.planning.nlp import knot_bounds, run, tangent_basis
-from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL, ClearPosture, LightPlacement
+from optlight.planning.placement import CLEARANCE_TOL, NEAR_STEP, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.policy import Reacher, place_landmarks
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.robot import Robot, generalized_ik
@@ -356,6 +356,41 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
     assert warm[1] >= CAPTURE_SLACK - CLEARANCE_TOL
 
 
+def test_a_clear_posture_near_its_anchor_starts_from_the_small_barrier(small_setup: Setup) -> None:
+    """The default face (the camera's view its only rows), a chain's next light on the view boundary,
+    at azimuth 70° after 60°: from the IK's angles, started at the previous light's clear posture, IPOPT
+    starts from the small barrier and ends on the posture it reaches from its default barrier, in
+    fewer iterations. From a warm start farther than NEAR_STEP from the anchor, the default barrier."""
+    robot, sphere, env = small_setup.robot, small_setup.sphere, small_setup.environment
+    assert env is not None and not env.collisions
+    zenith = sphere.zenith_min
+    first = sphere.position(zenith, math.radians(60.0))
+    start = generalized_ik(robot, sphere, first, robot.theta_ref, restarts=False, **small_setup.ik)
+    previous = ClearPosture(small_setup, env).solve(first, robot.theta_ref, warm=start.theta)
+    assert previous is not None
+    light = sphere.position(zenith, math.radians(70.0))
+    ik = generalized_ik(robot, sphere, light, previous[0], restarts=False, **small_setup.ik)
+    assert ik.success and np.abs(ik.theta - previous[0]).max() <= NEAR_STEP
+    assert env.worst_sphere_row(robot, ik.theta)[0] < CAPTURE_SLACK  # the IK's arm in the view
+
+    posture = ClearPosture(small_setup, env)
+    found = posture.solve(light, previous[0], warm=ik.theta)
+    assert found is not None and list(posture._solvers) == [(None, True)]
+    small = posture._solver(None, True)[0].stats()["iter_count"]
+    t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
+    nlp, lbg, ubg = posture._solver(None, False)
+    lower, upper = knot_bounds(robot)
+    args = {"p": np.r_[previous[0], light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg}
+    default = run(nlp, {"x0": ik.theta, **args})
+    assert default.success and small < default.iterations
+    # to IPOPT's tolerance: the last joint turns the light about its axis, which only the cost settles
+    np.testing.assert_allclose(found[0], np.clip(default.x, lower, upper), atol=1e-5)
+
+    far = ClearPosture(small_setup, env)
+    far.solve(light, robot.theta_ref, warm=ik.theta + NEAR_STEP + 0.1)
+    assert list(far._solvers) == [(None, False)]
+
+
 def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     """table_wall, the IK's arm in the wall (zenith 30°, azimuth 0°): ClearPosture solves with the
     clearance rows near θ₀ (and more if its solution breaks one left out); its posture is the one
@@ -368,12 +403,13 @@ def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     posture = ClearPosture(setup, env)
     found = posture.solve(light, ik.theta)
     assert found is not None
-    row_sets = [key for key in posture._solvers if key is not None]
+    row_sets = [key for key, _ in posture._solvers if key is not None]
     rows = len(env.clearance_labels(robot))
     assert row_sets and all(len(key) < rows / 2 for key in row_sets)
+    assert not any(small for _, small in posture._solvers)  # clearance rows: IPOPT's default barrier
 
     t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
-    nlp, lbg, ubg = posture._solver(None)
+    nlp, lbg, ubg = posture._solver(None, False)
     lower, upper = knot_bounds(robot)
     every = run(nlp, {"x0": ik.theta, "p": np.r_[ik.theta, light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg})
     assert every.success
