@@ -260,11 +260,12 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
 
     _, _, path, warm = setup
     real = trajectory.TrajectoryOptimizer.solve
-    barriers, expects = [], []
+    barriers, expects, budgets = [], [], []
 
     def fails_from_the_default_barrier(self, path_, sphere, theta0, fixed_start=False):
         barriers.append(self.options.get("ipopt.mu_init"))
         expects.append(self.options.get("ipopt.expect_infeasible_problem"))
+        budgets.append(self.options["ipopt.max_iter"])
         result = real(self, path_, sphere, theta0, fixed_start)
         return result if barriers[-1] is not None else replace(result, success=False, status="Infeasible_Problem_Detected")
 
@@ -273,6 +274,7 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
     result = trajectory.optimize_knots(free, path, warm)
     assert barriers == [None, trajectory.WARM_MU_INIT] and result.success
     assert expects == [None, "yes"]  # the retry, not the first try, expects an infeasible problem
+    assert budgets == [trajectory.FIRST_TRY_ITER, free.solver.max_iter] and trajectory.FIRST_TRY_ITER < free.solver.max_iter
     alone = real(trajectory.TrajectoryOptimizer(free.robot, joint_weights=1.0 / free.limits.velocity**2, retry=True), path, free.sphere, warm)
     assert result.iterations > alone.iterations  # both tries counted
 
@@ -284,10 +286,11 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
 
     _, _, path, warm = setup
     real = trajectory.TrajectoryOptimizer.solve
-    barriers = []
+    barriers, budgets = [], []
 
     def fails(self, path_, sphere, theta0, fixed_start=False):
         barriers.append(self.options.get("ipopt.mu_init"))
+        budgets.append(self.options["ipopt.max_iter"])
         return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
@@ -299,6 +302,28 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
     with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
         trajectory.optimize_knots(free, path, missed)
     assert barriers == [None]
+    assert budgets == [free.solver.max_iter]  # the only try: all of [solver] max_iter
+
+
+def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Setup, setup, monkeypatch) -> None:
+    """With a retry to follow, IPOPT itself stops the first try after FIRST_TRY_ITER iterations (3
+    here, where it needs more), and the retry from the small barrier solves the NLP."""
+    from optlight.planning import trajectory
+
+    _, _, path, warm = setup
+    real = trajectory.TrajectoryOptimizer.solve
+    tries = []
+
+    def recorded(self, path_, sphere, theta0, fixed_start=False):
+        tries.append(real(self, path_, sphere, theta0, fixed_start))
+        return tries[-1]
+
+    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", recorded)
+    monkeypatch.setattr(trajectory, "FIRST_TRY_ITER", 3)
+    free = replace(small_setup, environment=None)
+    result = trajectory.optimize_knots(free, path, warm)
+    assert [(t.status, t.iterations) for t in tries[:1]] == [("Maximum_Iterations_Exceeded", 3)]
+    assert len(tries) == 2 and tries[1].success and result.success and tries[1].iterations > 3
 
 
 def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
