@@ -147,6 +147,32 @@ def test_zenith_search_finds_a_minimum_off_the_sweep_grid(setup: Setup) -> None:
     assert abs(solved.x[0] - scan[np.argmin(costs)]) <= lm_module.REFINE_TOL + (hi - lo) / 300
 
 
+def test_a_seed_on_the_views_boundary_the_objective_rises_from_is_not_searched(
+    small_setup: Setup, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The default face's landmarks lie on the view's boundary, the smallest allowed zenith: each
+    azimuth's seed there is an end of the allowed zeniths the objective rises from, so one
+    evaluation inside replaces its zenith search, and the landmarks are the ones the searches give."""
+    probed = find_landmarks(small_setup)
+    lo = small_setup.sphere.zenith_min
+    assert all(lm.zenith == lo for lm in probed.landmarks)  # the case
+    monkeypatch.setattr(lm_module.ZenithSearch, "rises_from_end", lambda *args: False)
+    searched = find_landmarks(small_setup)
+    assert [(lm.zenith, lm.azimuth, lm.cost, lm.status) for lm in probed.landmarks] == [
+        (lm.zenith, lm.azimuth, lm.cost, lm.status) for lm in searched.landmarks
+    ]
+    assert probed.iterations < searched.iterations / 2
+
+    monkeypatch.undo()
+    scene, objective, sphere = small_setup.search_scene, small_setup.search_objective, small_setup.sphere
+    search = lm_module.ZenithSearch(scene, objective, sphere)
+    mask = scene.visibility(sphere.position(lo, 0.0))
+    inside = float(objective.numpy(scene.pixels(sphere.position(lo + lm_module.REFINE_TOL, 0.0), mask)))
+    assert search.rises_from_end(0.0, lo, inside - 1e-9, mask)
+    assert not search.rises_from_end(0.0, lo, inside + 1e-9, mask)  # falls into the allowed zeniths
+    assert not search.rises_from_end(0.0, lo + 0.01, -math.inf, mask)  # not an end
+
+
 def test_free_mode_keeps_the_separation(scene: Scene) -> None:
     free = small_problem(mode="free", count=4, min_separation_deg=8.0, sweep_step_deg=6.0, resolution=32)
     out = find_landmarks(Setup.from_problem(free))

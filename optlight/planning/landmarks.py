@@ -16,7 +16,10 @@ light at ``a(θ, φ_j)``. ``D`` is multimodal in θ, so per azimuth:
    visibility mask: shadow rays at the seed; when the mask at the solution differs from the one
    searched with, the search runs again with the mask there (at most :data:`VISIBILITY_ROUNDS`
    searches per seed). ``D`` is a smooth function of θ on a bracket of a sweep minimum once the mask
-   is fixed, so a derivative-free 1-D search converges in ~10 renders;
+   is fixed, so a derivative-free 1-D search converges in ~10 renders. A seed on an end of the
+   allowed zeniths that ``D`` rises from (``D`` at :data:`REFINE_TOL` inside, mask fixed, above the
+   seed's) is not searched: the search would end on it within its tolerance (the default face's
+   landmarks lie on the view's boundary: its search 0.68 → 0.61 s, every landmark the same);
 4. *select*: the best sweep sample and the refined zeniths are scored with the NumPy renderer and
    shadow rays; the lowest wins, so the landmark is never worse than the best sweep sample;
 5. *polish* (only when the search resolution is below the camera's): one parabolic step of the
@@ -274,6 +277,17 @@ class ZenithSearch:
         result = minimize_scalar(cost, bounds=bracket, method="bounded", options={"xatol": REFINE_TOL})
         status = "converged" if result.success else str(result.message)
         return Solve(np.array([float(result.x)]), int(result.nfev), status, bool(result.success))
+
+    def rises_from_end(self, azimuth: float, zenith: float, cost: float, visibility: Array) -> bool:
+        """Whether ``zenith`` (rad) is an end of the allowed zeniths and ``D`` rises from it: ``D`` at
+        :data:`REFINE_TOL` inside, with the mask ``visibility`` held, above ``cost`` (``D`` there).
+        Then the search would end there, on the end, within its tolerance."""
+        lo, hi = self.sphere.zenith_min, self.sphere.zenith_max
+        if zenith not in (lo, hi) or lo == hi:
+            return False
+        inside = zenith + REFINE_TOL if zenith == lo else zenith - REFINE_TOL
+        pixels = self.scene.pixels(self.sphere.position(inside, azimuth), visibility)
+        return float(self.objective.numpy(pixels)) > cost
 
 
 class CapRefiner:
@@ -570,12 +584,17 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
         ]
         best, iterations, first_status = seeds[0], 0, ""
         for seed in seeds[: spec.seeds]:
+            mask = masks[int(np.searchsorted(zenith, seed.zenith))]
+            # a seed on the view's boundary (or the cap's edge) the objective rises from needs no search
+            if refiner.rises_from_end(float(phi), seed.zenith, seed.cost, mask):
+                iterations += 1
+                continue
             bracket = _bracket(zenith, seed.zenith, search.sphere)
 
             def solve(_zenith: float, azimuth: float, mask: Array, bracket: tuple[float, float] = bracket) -> Solve:
                 return refiner.solve(azimuth, mask, bracket)
 
-            refined, its, status = search.refine(seed, solve, masks[int(np.searchsorted(zenith, seed.zenith))])
+            refined, its, status = search.refine(seed, solve, mask)
             iterations += its
             first_status = first_status or status
             if refined is not None and refined.cost < best.cost:
