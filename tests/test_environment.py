@@ -300,6 +300,22 @@ def test_a_light_inside_the_view_cone_is_caught_at_capture_times(problem, env, r
         env.check(robot, thetas, times, capture_times=[0.5])
 
 
+def test_the_capture_samples_are_those_within_the_tolerance_of_a_capture_time() -> None:
+    """Against the definition, sample by sample: unsorted times, samples just inside and just outside
+    the tolerance of a capture, two samples at one capture."""
+    from optlight.environment.check import TIME_TOLERANCE_S, _capture_mask
+
+    rng = np.random.default_rng(3)
+    captures = np.array([0.25, 1.5, 7.0])
+    times = np.r_[rng.uniform(0.0, 8.0, 500), captures, 1.5 + 0.9 * TIME_TOLERANCE_S, 7.0 - 1.1 * TIME_TOLERANCE_S]
+    rng.shuffle(times)
+    expected = (np.abs(times[:, None] - captures[None]) <= TIME_TOLERANCE_S).any(axis=1)
+    assert expected.sum() == 4
+    np.testing.assert_array_equal(_capture_mask(times, captures), expected)
+    with pytest.raises(ValueError, match="not one of the sample times"):
+        _capture_mask(times, [7.0 + 1.5 * TIME_TOLERANCE_S])
+
+
 def test_a_clear_configuration_passes(env, robot, clear_theta) -> None:
     report = env.check(robot, clear_theta[None], [0.0], capture_times=[0.0])
     assert report.passed, report.summary()
