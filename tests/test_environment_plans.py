@@ -391,6 +391,44 @@ def test_a_clear_posture_near_its_anchor_starts_from_the_small_barrier(small_set
     assert list(far._solvers) == [(None, False)]
 
 
+def test_among_obstacles_the_small_barrier_only_restores_the_view() -> None:
+    """table_wall, chain steps of 10° along the view's boundary from a clear posture: where the IK's
+    arm is clear of the obstacles and only in the camera's view (azimuth 130° after 120°), IPOPT
+    starts from the small barrier and ends on the posture it reaches from its default barrier; where
+    it is too close to an obstacle (290° after 280°), from the default barrier."""
+    setup = Setup.from_problem(reduced("table_wall"))
+    robot, sphere, env = setup.robot, setup.sphere, setup.environment
+    assert env is not None and env.collisions
+    lower, upper = knot_bounds(robot)
+
+    def step(azimuth_deg: float) -> tuple[ClearPosture, np.ndarray, np.ndarray, np.ndarray, tuple]:
+        first = sphere.position(sphere.zenith_min, math.radians(azimuth_deg))
+        start = generalized_ik(robot, sphere, first, robot.theta_ref, restarts=False, **setup.ik)
+        previous = ClearPosture(setup, env).solve(first, robot.theta_ref, warm=start.theta)
+        assert previous is not None
+        light = sphere.position(sphere.zenith_min, math.radians(azimuth_deg + 10.0))
+        ik = generalized_ik(robot, sphere, light, previous[0], restarts=False, **setup.ik)
+        assert ik.success and np.abs(ik.theta - previous[0]).max() <= NEAR_STEP
+        posture = ClearPosture(setup, env)
+        return posture, previous[0], light, ik.theta, posture.solve(light, previous[0], warm=ik.theta)
+
+    posture, anchor, light, warm, found = step(120.0)
+    clearance, view = env.sphere_clearance(robot, warm)
+    assert clearance.min() >= CAPTURE_SLACK > view.min()  # the case: only the view to restore
+    assert found is not None and {small for _, small in posture._solvers} == {True}
+    t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
+    default = ClearPosture(setup, env)
+    nlp, lbg, ubg = default._solver(None, False)  # every row, from the default barrier
+    args = {"x0": warm, "p": np.r_[anchor, light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg}
+    every = run(nlp, args)
+    assert every.success
+    np.testing.assert_allclose(found[0], np.clip(every.x, lower, upper), atol=1e-5)
+
+    posture, _, _, warm, _ = step(280.0)
+    assert env.sphere_clearance(robot, warm)[0].min() < CAPTURE_SLACK  # too close to an obstacle
+    assert {small for _, small in posture._solvers} == {False}
+
+
 def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     """table_wall, the IK's arm in the wall (zenith 30°, azimuth 0°): ClearPosture solves with the
     clearance rows near θ₀ (and more if its solution breaks one left out); its posture is the one
@@ -406,7 +444,7 @@ def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     row_sets = [key for key, _ in posture._solvers if key is not None]
     rows = len(env.clearance_labels(robot))
     assert row_sets and all(len(key) < rows / 2 for key in row_sets)
-    assert not any(small for _, small in posture._solvers)  # clearance rows: IPOPT's default barrier
+    assert not any(small for _, small in posture._solvers)  # the arm in the wall: the default barrier
 
     t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
     nlp, lbg, ubg = posture._solver(None, False)

@@ -557,21 +557,25 @@ class ClearPosture:
 
         A ``warm`` start that already holds the light at ``target`` (the generalized IK's angles,
         :class:`~optlight.planning.policy.Reacher`) leaves IPOPT only the clearance to restore, not
-        the pose as well. Where that is only the camera's view (no clearance rows) and ``warm`` is
-        within :data:`NEAR_STEP` of ``theta0`` (a chain's next landmark), IPOPT starts from the
-        small barrier :data:`~optlight.planning.trajectory.WARM_MU_INIT` instead of its default 0.1,
-        which first pushes the iterate away from the rows it nearly meets: the default face's 50
-        solves took 659 iterations instead of 997, the 576-capture scaling cell's placement
-        7.2 → 5.1 s, and every built-in problem's plan is the same. Not farther (yale_grid's 1.4-rad
-        step then went to another posture, and its plan's motion grew 4 %), nor with clearance rows
-        (the 36-capture, 3-obstacle cell then lost a capture, the 144-capture one's mean cost grew
-        20 %): there it settles in the warm start's local optimum, not the anchor's."""
+        the pose as well. Where that is only the camera's view (``warm`` breaks no clearance row) and
+        ``warm`` is within :data:`NEAR_STEP` of ``theta0`` (a chain's next landmark), IPOPT starts from
+        the small barrier :data:`~optlight.planning.trajectory.WARM_MU_INIT` instead of its default
+        0.1, which first pushes the iterate away from the rows it nearly meets: the default face's 50
+        solves took 659 iterations instead of 997, the 576-capture scaling cell's placement 7.2 →
+        5.1 s with every built-in problem's plan the same, and the 576-capture cells among obstacles
+        19–21 s instead of 23–25 s. Not farther (yale_grid's 1.4-rad step then went to another
+        posture, and its plan's motion grew 4 %), nor where ``warm`` breaks a clearance row (with every
+        solve among the scaling benchmark's obstacles from the small barrier, the 36-capture cell lost
+        a capture and the 144-capture one's mean cost grew 20 %): there it settles in the warm start's
+        local optimum, not the anchor's."""
         target = np.asarray(target, float)
         t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)
         warm = theta0 if warm is None else np.asarray(warm, float)
         parameters = np.r_[theta0, target, t1, t2]
-        small_barrier = not self.environment.collisions and bool(np.abs(warm - theta0).max() <= NEAR_STEP)
+        env = self.environment
+        only_view = not env.collisions or float(env.clearance_values(self.robot, warm).min(initial=np.inf)) >= CAPTURE_SLACK
+        small_barrier = only_view and float(np.abs(warm - theta0).max()) <= NEAR_STEP
 
         def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
             nlp, lbg, ubg = self._solver(active, small_barrier)
