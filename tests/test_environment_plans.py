@@ -449,7 +449,8 @@ def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
     nlp, lbg, ubg = posture._solver(None, False)
     lower, upper = knot_bounds(robot)
-    every = run(nlp, {"x0": ik.theta, "p": np.r_[ik.theta, light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg})
+    bounds = {"lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg}
+    every = run(nlp, {"x0": ik.theta, "p": np.r_[ik.theta, light, t1, t2], **bounds})
     assert every.success
     np.testing.assert_allclose(found[0], np.clip(every.x, lower, upper), atol=1e-6)
     clearance, view = env.sphere_clearance(robot, found[0])

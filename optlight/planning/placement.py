@@ -482,7 +482,9 @@ class ClearPosture:
         self._options = ipopt_options(
             setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
         )
-        self._solvers: OrderedDict[tuple[tuple[int, ...] | None, bool], tuple[ca.Function, Array, Array]] = OrderedDict()
+        #: (clearance row set or None, small barrier) -> (nlp, lbg, ubg)
+        self._solvers: OrderedDict[tuple[tuple[int, ...] | None, bool], tuple[ca.Function, Array, Array]]
+        self._solvers = OrderedDict()
 
     def _solver(self, active: NDArray[np.bool_] | None, small_barrier: bool) -> tuple[ca.Function, Array, Array]:
         """The NLP with the clearance rows ``active`` ((1, m) over the environment's clearance rows;
@@ -574,7 +576,9 @@ class ClearPosture:
         warm = theta0 if warm is None else np.asarray(warm, float)
         parameters = np.r_[theta0, target, t1, t2]
         env = self.environment
-        only_view = not env.collisions or float(env.clearance_values(self.robot, warm).min(initial=np.inf)) >= CAPTURE_SLACK
+        # only the view to restore: the warm start's arm clear of the obstacles (and of itself)
+        nearest = env.clearance_values(self.robot, warm).min(initial=np.inf) if env.collisions else np.inf
+        only_view = float(nearest) >= CAPTURE_SLACK
         small_barrier = only_view and float(np.abs(warm - theta0).max()) <= NEAR_STEP
 
         def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
