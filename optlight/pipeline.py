@@ -269,11 +269,12 @@ def optimize_window(
     captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
     straight line between the captures' postures), and the NLP runs again. Returns the path, its
     warm start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such
-    segment, or again."""
+    segment, or again. Where there are such segments, the solve on the sphere is told the transfers
+    can follow (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry)."""
+    unfollowed = unfollowed_segments(setup, path, warm, failures)
     try:
-        return path, warm, optimize_knots(setup, path, warm, fixed_start)
+        return path, warm, optimize_knots(setup, path, warm, fixed_start, fallback=bool(unfollowed.any()))
     except SolverError:
-        unfollowed = unfollowed_segments(setup, path, warm, failures)
         if not unfollowed.any():
             raise
     path = path.with_transfers(unfollowed)

@@ -151,10 +151,11 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
 
     _, _, path, warm = setup
     thetas = warm[path.landmark_knots]
-    seen = []
+    seen, fallbacks = [], []
 
-    def on_the_sphere_fails(setup_, path_, warm_, fixed_start):
+    def on_the_sphere_fails(setup_, path_, warm_, fixed_start, *, fallback=False):
         seen.append(path_.transfers.copy())
+        fallbacks.append(fallback)
         if not path_.transfers.any():
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
         return TrajectoryNLPResult(warm_, True, "solved", 0.0, 0.0, 1, 0.0)
@@ -166,6 +167,8 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     left, left_warm, result = pipeline.optimize_path(small_setup, path, warm, np.array([0, 0, 3, 0]), thetas)
     assert result.status == "solved" and left.transfers.tolist() == [False, False, True, False]
     assert [t.tolist() for t in seen[1:]] == [[False] * 4, [False, False, True, False]]
+    # the transfers can follow the solve on the sphere only where the IK missed a knot; not themselves
+    assert fallbacks == [False, True, False]
     segment = left.segments()[2]
     np.testing.assert_allclose(np.diff(left_warm[segment], 2, axis=0), 0.0, atol=1e-12)
     np.testing.assert_array_equal(left_warm[: segment.start + 1], warm[: segment.start + 1])
@@ -239,7 +242,7 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     _, _, path, warm = setup
     calls = []
 
-    def fails_from_a_fixed_start(setup_, path_, warm_, fixed_start):
+    def fails_from_a_fixed_start(setup_, path_, warm_, fixed_start, *, fallback=False):
         calls.append((path_.n_knots, fixed_start))
         if fixed_start:
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
@@ -303,6 +306,35 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
         trajectory.optimize_knots(free, path, missed)
     assert barriers == [None]
     assert budgets == [free.solver.max_iter]  # the only try: all of [solver] max_iter
+
+
+def test_with_a_fallback_to_follow_the_first_try_has_its_budget_and_no_retry(
+    small_setup: Setup, setup, monkeypatch
+) -> None:
+    """Where the caller's transfers can follow (a warm start with a segment the IK did not follow),
+    a failed first try is not tried again from the small barrier, and stops at FIRST_TRY_ITER even
+    from a warm start off the sphere; without the fallback that warm start's try has all of max_iter."""
+    from optlight.planning import trajectory
+
+    _, _, path, warm = setup
+    real = trajectory.TrajectoryOptimizer.solve
+    barriers, budgets = [], []
+
+    def fails(self, path_, sphere, theta0, fixed_start=False):
+        barriers.append(self.options.get("ipopt.mu_init"))
+        budgets.append(self.options["ipopt.max_iter"])
+        return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
+
+    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
+    free = replace(small_setup, environment=None)
+    missed = warm.copy()
+    missed[3] += 0.05  # off the sphere: no retry either way
+    for start, fallback, budget in ((warm, True, trajectory.FIRST_TRY_ITER), (missed, True, trajectory.FIRST_TRY_ITER), (missed, False, free.solver.max_iter)):
+        barriers.clear()
+        budgets.clear()
+        with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
+            trajectory.optimize_knots(free, path, start, fallback=fallback)
+        assert barriers == [None] and budgets == [budget]
 
 
 def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Setup, setup, monkeypatch) -> None:

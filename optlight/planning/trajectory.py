@@ -354,10 +354,12 @@ ACTIVE_ROUNDS = 2
 
 
 def optimize_knots(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False
+    setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False, *, fallback: bool = False
 ) -> TrajectoryNLPResult:
     """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
-    the first knot kept at its ``warm`` angles with ``fixed_start``.
+    the first knot kept at its ``warm`` angles with ``fixed_start``; ``fallback``: the caller has
+    another way to go when this one fails (:func:`~optlight.pipeline.optimize_window`'s transfers,
+    for a warm start with segments the per-knot IK did not follow).
 
     Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits); with an
     environment its view-cone rows join, and of its clearance rows those that can bind, knot by
@@ -393,15 +395,22 @@ def optimize_knots(
     iterations) to knots that held a capture's light at the antipode of its landmark (0.8 m away:
     the pin rows' other root on the sphere), which verification refused.
 
-    Where the retry can follow, the first try stops after :data:`FIRST_TRY_ITER` iterations: on the
-    ten built-in problems and the scaling benchmark's 576 captures among 3 obstacles every first try
-    that succeeded did so within 83 iterations, while the five of 576 / 3 that failed ran 181–300
-    (four of them; 905 iterations, ~9 s) before IPOPT gave up and the retry or a fallback took
-    over. Where it cannot, the first try has all ``[solver] max_iter`` iterations: it is the last.
+    Nor with a ``fallback``: a warm start whose IK jumped branches between two knots (a step beyond
+    ``max_step_rad``) or put the arm into an obstacle at one is not near the feasible set either, and
+    the segment it did not follow becomes a transfer. On the ten built-in problems and the scaling
+    benchmark's obstacle cells no such retry ever succeeded: each failed (after 32–134 iterations,
+    2.5 s of one window of 576 / 3) before the transfers solved.
+
+    Where the retry or the fallback can follow, the first try stops after :data:`FIRST_TRY_ITER`
+    iterations: on the ten built-in problems and the scaling benchmark's 576 captures among 3
+    obstacles every first try that succeeded did so within 83 iterations, while the five of 576 / 3
+    that failed ran 181–300 (four of them; 905 iterations, ~9 s) before IPOPT gave up and the retry
+    or a fallback took over (photometric_stereo's, 273 before the transfers). Where neither can, the
+    first try has all ``[solver] max_iter`` iterations: it is the last.
     Raises :class:`SolverError` when the solves fail.
     """
-    can_retry = _warm_start_on_sphere(setup, path, warm)
-    first_budget = FIRST_TRY_ITER if can_retry else None
+    can_retry = not fallback and _warm_start_on_sphere(setup, path, warm)
+    first_budget = FIRST_TRY_ITER if can_retry or fallback else None
     first = _active_rounds(setup, path, warm, fixed_start, retry=False, max_iter=first_budget)
     retry = not first.success and can_retry
     nlp = _active_rounds(setup, path, warm, fixed_start, retry=True) if retry else first
