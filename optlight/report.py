@@ -36,7 +36,7 @@ from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob
-from optlight.viz.figures import landmark_figures
+from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
 
 if TYPE_CHECKING:
@@ -233,6 +233,11 @@ def landmark_jobs(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
     return landmark_figures(landmarks, scene) if landmarks.mode != "set" else {}
 
 
+def _landmark_figure_names(landmarks: LandmarkSet) -> tuple[str, ...]:
+    """The file stems of :func:`landmark_jobs`, without making the jobs."""
+    return LANDMARK_FIGURES if landmarks.mode != "set" else ()
+
+
 def motion_jobs(
     setup: Setup, visited: Sequence[Landmark], knot_thetas: Array, trajectory: Trajectory
 ) -> dict[str, FigureJob]:
@@ -260,11 +265,9 @@ def motion_jobs(
     }
 
 
-def _png_source(job: FigureJob, drawn: Future[bytes] | None, worker: FigureWorker | None) -> Callable[[], bytes]:
-    """Where a figure's PNG comes from: a worker that drew it already (unless it was dropped), else
-    the worker now, else this process when asked."""
-    if drawn is not None and not drawn.cancelled():
-        return drawn.result
+def _png_source(job: FigureJob, worker: FigureWorker | None) -> Callable[[], bytes]:
+    """Where the PNG of a figure no worker drew yet comes from: the worker now, else this process
+    when asked."""
     return worker.draw(job).result if worker is not None else job.png
 
 
@@ -299,18 +302,23 @@ def save_results(
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
     robot = setup.robot
+    drawn = {name: png for name, png in (drawn or {}).items() if not png.cancelled()}
+    # the landmark jobs only when one is not drawn: making the contact sheet's renders its images
+    missing = not drawn.keys() >= set(_landmark_figure_names(landmarks))
     figures = {
         **motion_jobs(setup, visited, nlp.theta, trajectory),
-        **landmark_jobs(landmarks, setup.scene),
+        **(landmark_jobs(landmarks, setup.scene) if missing else {}),
         **(extra_figures or {}),
     }
+    sources: dict[str, Callable[[], bytes]] = {name: png.result for name, png in drawn.items()}
+    sources |= {name: _png_source(job, worker) for name, job in figures.items() if name not in drawn}
 
     def preview_html(folder: Path) -> list[Path]:
         assert preview is not None
         return [preview(folder / "preview.html")]
 
     def report(folder: Path) -> list[Path]:
-        names = sorted(f"{name}.png" for name in figures)
+        names = sorted(f"{name}.png" for name in sources)
         out = folder / "report.md"
         out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
         return [out]
@@ -349,7 +357,7 @@ def save_results(
         joint_names=robot.joint_names,
         light_directions_camera=light_directions_camera,
         image_pattern=setup.trajectory_spec.image_pattern,
-        figures={name: _png_source(job, (drawn or {}).get(name), worker) for name, job in figures.items()},
+        figures=sources,
         writers=writers,
         overwrite=overwrite,
         csv_rate_hz=traj_spec.rate_hz,

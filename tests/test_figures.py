@@ -68,6 +68,9 @@ class _Sized(list):
     def landmarks(self) -> list:
         return list(self)
 
+    def visibility(self, pixels: int) -> None:
+        """No kept visibility: the contact sheet casts its own shadow rays."""
+
 
 def test_trajectory_figure_shades_every_dwell_full_height(tmp_path):
     robot = load_robot("panda")

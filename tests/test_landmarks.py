@@ -19,7 +19,7 @@ from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.spec import Problem
-from optlight.viz.figures import save_landmark_figures
+from optlight.viz.figures import contact_sheet_images, save_landmark_figures
 
 REF_ZENITH_DEG = 31.3  # off the sweep grid, so only the refinement can land on it; out of the camera's view
 
@@ -173,10 +173,23 @@ def test_a_seed_on_the_views_boundary_the_objective_rises_from_is_not_searched(
     assert not search.rises_from_end(0.0, lo + 0.01, -math.inf, mask)  # not an end
 
 
+def test_the_kept_visibility_is_each_landmarks_own_shadow_rays(result: lm_module.LandmarkSet, scene: Scene) -> None:
+    """The masks the search keeps are the shadow rays cast afresh at each landmark's light, and the
+    contact sheet's images from them are the renders at those lights."""
+    kept = result.visibility(scene.gbuffer.size)
+    assert kept is not None
+    np.testing.assert_array_equal(kept, scene.visibility(result.positions))
+    assert (kept == 0.0).any()  # some pixels in cast shadow: the comparison discriminates
+    images = contact_sheet_images(result, scene)
+    for image, position in zip(images, result.positions, strict=True):
+        np.testing.assert_allclose(image, scene.render(position), rtol=1e-6, atol=1e-7)  # float32
+
+
 def test_free_mode_keeps_the_separation(scene: Scene) -> None:
     free = small_problem(mode="free", count=4, min_separation_deg=8.0, sweep_step_deg=6.0, resolution=32)
     out = find_landmarks(Setup.from_problem(free))
     assert len(out) == 4
+    np.testing.assert_array_equal(out.visibility(scene.gbuffer.size), scene.visibility(out.positions))
     d = (out.positions - scene.sphere.center) / scene.sphere.radius
     angles = np.degrees(np.arccos(np.clip(d @ d.T, -1, 1)))
     np.fill_diagonal(angles, np.inf)

@@ -137,7 +137,10 @@ class LandmarkSet:
     resolution; ``sweep`` the coarse sweep; ``resolution`` (width, height) of the search renders;
     ``time_s`` the total wall time, setup (scenes, reference, NLP build) included. ``view_zenith``
     (rad): lights nearer the camera's axis were left out, their housing being in the camera's view;
-    ``notes``: the landmarks whose best light lay there, and where the best clear light is."""
+    ``notes``: the landmarks whose best light lay there, and where the best clear light is.
+    ``shadows``: each landmark's cast-shadow visibility at the camera's resolution, the one its
+    shadow rays gave as it was scored, bits packed along the object pixels (:meth:`visibility`);
+    None when they were not kept."""
 
     landmarks: tuple[Landmark, ...]
     mode: Literal["azimuth", "free", "set"]
@@ -149,9 +152,18 @@ class LandmarkSet:
     time_s: float
     view_zenith: float = 0.0
     notes: tuple[str, ...] = ()
+    shadows: NDArray[np.uint8] | None = None
 
     def __len__(self) -> int:
         return len(self.landmarks)
+
+    def visibility(self, pixels: int) -> Array | None:
+        """The landmarks' cast-shadow visibility (n, ``pixels``) in {0., 1.} over the camera's
+        ``pixels`` object pixels (:meth:`optlight.scene.Scene.visibility` at each landmark's light);
+        None when :attr:`shadows` were not kept."""
+        if self.shadows is None:
+            return None
+        return np.unpackbits(self.shadows, axis=1, count=pixels).astype(float)
 
     @property
     def zeniths(self) -> Array:
@@ -422,39 +434,43 @@ class _Search:
 
     def finish(
         self, index: int, sample: _Candidate, best: _Candidate, iterations: int, t0: float, polish: bool
-    ) -> tuple[Landmark, Array]:
-        """The landmark, and its histogram, from the best sweep sample and the best candidate at the
-        search resolution. When the search ran at a lower resolution, both (and, with ``polish``, the
-        result of :meth:`polish` from the best) are scored again at the camera's, shadow rays
-        included, and the lowest wins."""
+    ) -> tuple[Landmark, Array, Array]:
+        """The landmark, its histogram and its visibility mask at the camera's resolution, from the
+        best sweep sample and the best candidate at the search resolution. When the search ran at a
+        lower resolution, both (and, with ``polish``, the result of :meth:`polish` from the best) are
+        scored again at the camera's, shadow rays included, and the lowest wins. The mask is the
+        landmark's own (a polished winner, scored with the best's mask held fixed, casts its rays,
+        as does one whose azimuth was wrapped into [0, 2π))."""
+        masks: dict[tuple[float, float], Array] = {}
 
-        def score(c: _Candidate, mask: Array | None = None) -> _Scored:
-            return (*self.objective.evaluate(self.scene.pixels(self.sphere.position(c.zenith, c.azimuth), mask)), c)
+        def score(c: _Candidate) -> _Scored:
+            position = self.sphere.position(c.zenith, c.azimuth)
+            masks[c.zenith, c.azimuth] = mask = self.scene.visibility(position)
+            return (*self.objective.evaluate(self.scene.pixels(position, mask)), c)
 
-        if self.search is self.scene:
-            scored = [score(best)]
-        else:
-            mask = self.scene.visibility(self.sphere.position(best.zenith, best.azimuth))
-            scored = [score(best, mask)]
+        scored = [score(best)]
+        if self.search is not self.scene:
             # a sample at the best's light scores the same: only a sample elsewhere is scored
             if (sample.zenith, sample.azimuth) != (best.zenith, best.azimuth):
                 scored.append(score(sample))
             if polish:
-                scored.extend(self.polish(best, scored[0][0], mask))
+                scored.extend(self.polish(best, scored[0][0], masks[best.zenith, best.azimuth]))
         cost, histogram, winner = min(scored, key=lambda s: s[0])
         azimuth = float(np.mod(winner.azimuth, 2 * np.pi))
+        position = self.sphere.position(winner.zenith, azimuth)
+        mask = masks.get((winner.zenith, winner.azimuth)) if azimuth == winner.azimuth else None
         lm = Landmark(
             index=index,
             zenith=winner.zenith,
             azimuth=azimuth,
-            position=self.sphere.position(winner.zenith, azimuth),
+            position=position,
             cost=cost,
             status=winner.status,
             solver_status=winner.solver_status,
             iterations=iterations,
             time_s=time.perf_counter() - t0,
         )
-        return lm, histogram
+        return lm, histogram, self.scene.visibility(position) if mask is None else mask
 
 
 def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> LandmarkSet:
@@ -464,9 +480,9 @@ def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> Landmar
     t0 = time.perf_counter()
     search = _Search(setup)
     if search.spec.mode == "azimuth":
-        landmarks, histograms, grid = _azimuth_mode(search, progress)
+        landmarks, histograms, visibilities, grid = _azimuth_mode(search, progress)
     else:
-        landmarks, histograms, grid = _free_mode(search, progress)
+        landmarks, histograms, visibilities, grid = _free_mode(search, progress)
     return LandmarkSet(
         landmarks=tuple(landmarks),
         mode=search.spec.mode,
@@ -478,6 +494,7 @@ def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> Landmar
         time_s=time.perf_counter() - t0,
         view_zenith=setup.view_zenith,
         notes=tuple(_view_notes(search, landmarks, grid)),
+        shadows=np.packbits(np.array(visibilities, bool).reshape(len(landmarks), -1), axis=1),
     )
 
 
@@ -545,7 +562,12 @@ def distinct_landmarks(landmarks: Sequence[Landmark], tolerance: float) -> tuple
     return [landmarks[i] for i in sorted(kept)], notes
 
 
-def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
+#: What a mode finds: the landmarks, their histograms and visibility masks at the camera's
+#: resolution, and the sweep.
+_Found = tuple[list[Landmark], list[Array], list[Array], CostGrid]
+
+
+def _azimuth_mode(search: _Search, progress: Progress | None) -> _Found:
     spec = search.spec
     refiner = ZenithSearch(search.search, search.search_objective, search.sphere)
     zenith = _sweep_zeniths(search, math.radians(spec.sweep_step_deg))
@@ -554,6 +576,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
     costs = np.empty((spec.count, zenith.size))
     landmarks: list[Landmark] = []
     histograms: list[Array] = []
+    visibilities: list[Array] = []
 
     has_pole = _has_pole(zenith)
 
@@ -601,13 +624,14 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> tuple[list[Land
                 best = refined
         sample = dataclasses.replace(seeds[0], solver_status=first_status)
         best = sample if best is seeds[0] else best
-        lm, hist = search.finish(j, sample, best, iterations, t0, polish=True)
+        lm, hist, mask = search.finish(j, sample, best, iterations, t0, polish=True)
         t0 = time.perf_counter()
         landmarks.append(lm)
         histograms.append(hist)
+        visibilities.append(mask)
         if progress is not None:
             progress(j + 1, spec.count)
-    return landmarks, histograms, CostGrid(zenith, azimuth, costs)
+    return landmarks, histograms, visibilities, CostGrid(zenith, azimuth, costs)
 
 
 def _bracket(zenith: Array, seed: float, sphere: LightSphere) -> tuple[float, float]:
@@ -626,7 +650,7 @@ def _sweep_zeniths(search: _Search, step: float) -> Array:
     return np.unique(np.r_[full, search.sphere.zenith_min])
 
 
-def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmark], list[Array], CostGrid]:
+def _free_mode(search: _Search, progress: Progress | None) -> _Found:
     spec = search.spec
     step = math.radians(spec.sweep_step_deg)
     separation = math.radians(spec.min_separation_deg)
@@ -650,6 +674,7 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
     accepted: list[Array] = []
     landmarks: list[Landmark] = []
     histograms: list[Array] = []
+    visibilities: list[Array] = []
     for k in order:
         if len(landmarks) == spec.count:
             break
@@ -668,9 +693,10 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
             and _separated(direction_in_sphere_frame(refined.zenith, refined.azimuth), accepted, separation)
         ):
             best = refined
-        lm, hist = search.finish(len(landmarks), sample, best, iterations, t0, polish=False)
+        lm, hist, mask = search.finish(len(landmarks), sample, best, iterations, t0, polish=False)
         landmarks.append(lm)
         histograms.append(hist)
+        visibilities.append(mask)
         accepted.append(direction_in_sphere_frame(lm.zenith, lm.azimuth))
         if progress is not None:
             progress(azimuth.size + len(landmarks), total)
@@ -682,7 +708,7 @@ def _free_mode(search: _Search, progress: Progress | None) -> tuple[list[Landmar
             "(or a smaller landmarks.min_separation_deg)",
             spec.count,
         )
-    return landmarks, histograms, CostGrid(zenith, azimuth, costs)
+    return landmarks, histograms, visibilities, CostGrid(zenith, azimuth, costs)
 
 
 def _separated(direction: Array, accepted: list[Array], separation: float) -> bool:

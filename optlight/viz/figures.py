@@ -142,12 +142,15 @@ def histograms_figure(landmarks: LandmarkSet, indices: Sequence[int] | None = No
 
 
 def contact_sheet_images(landmarks: LandmarkSet, scene: Scene) -> np.ndarray:
-    """The camera image (NumPy renderer, shadow rays) at every landmark, (M, H, W): every light's
-    shadow rays in one ray-caster call."""
+    """The camera image (NumPy renderer, shadow rays) at every landmark, (M, H, W) float32: with the
+    visibility the landmark search kept (:meth:`~optlight.planning.landmarks.LandmarkSet.visibility`),
+    else every light's shadow rays in one ray-caster call."""
     positions = np.array([lm.position for lm in landmarks.landmarks]).reshape(-1, 3)
-    visibility = scene.visibility(positions)
+    visibility = landmarks.visibility(scene.gbuffer.size)
+    if visibility is None:
+        visibility = scene.visibility(positions)
     images = [scene.to_image(scene.pixels(p, v)) for p, v in zip(positions, visibility, strict=True)]
-    return np.array(images, float).reshape(len(positions), scene.camera.height, scene.camera.width)
+    return np.array(images, np.float32).reshape(len(positions), scene.camera.height, scene.camera.width)
 
 
 def contact_sheet_figure(
@@ -215,26 +218,28 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
     return fig
 
 
-def contact_sheet_of_scene(landmarks: LandmarkSet, scene: Scene) -> Figure:
-    """:func:`contact_sheet_figure` of the images :func:`contact_sheet_images` renders, so that a
-    worker process renders them too (a scene pickles; its ray caster is built again there)."""
-    return contact_sheet_figure(landmarks, contact_sheet_images(landmarks, scene), scene.light.saturation)
+#: The file stems of :func:`landmark_figures`, in its order.
+LANDMARK_FIGURES = ("landmarks_polar", "landmarks_histograms", "landmarks_images", "landmarks_cost")
 
 
 def landmark_figures(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
-    """The landmark figures by file stem: landmarks_polar, landmarks_histograms, landmarks_images,
-    landmarks_cost. The fixed-zenith circle is the reference light's zenith when the reference is a
-    light; the polar plots zoom to :func:`radial_limit`."""
+    """The landmark figures by file stem (:data:`LANDMARK_FIGURES`). The fixed-zenith circle is the
+    reference light's zenith when the reference is a light; the polar plots zoom to
+    :func:`radial_limit`. The contact sheet's images are rendered here, from the visibility the
+    search kept, so that its job carries images (10 MB for the default's 36 landmarks) rather than
+    the scene (26 MB, its ray caster built again and every shadow ray cast again where it is drawn)."""
     ref = scene.problem.objective.reference
     fixed = math.radians(ref.zenith_deg) if ref.kind == "light" else None
     r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed)
     dpi = LANDMARK_FIGURE_DPI
-    return {
-        "landmarks_polar": FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed), dpi),
-        "landmarks_histograms": FigureJob(histograms_figure, (landmarks,), dpi),
-        "landmarks_images": FigureJob(contact_sheet_of_scene, (landmarks, scene), dpi),
-        "landmarks_cost": FigureJob(cost_map_figure, (landmarks, r_max), dpi),
-    }
+    images = contact_sheet_images(landmarks, scene)
+    jobs = (
+        FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed), dpi),
+        FigureJob(histograms_figure, (landmarks,), dpi),
+        FigureJob(contact_sheet_figure, (landmarks, images, scene.light.saturation), dpi),
+        FigureJob(cost_map_figure, (landmarks, r_max), dpi),
+    )
+    return dict(zip(LANDMARK_FIGURES, jobs, strict=True))
 
 
 def save_landmark_figures(landmarks: LandmarkSet, scene: Scene, folder: str | Path) -> list[Path]:
