@@ -282,14 +282,14 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
     assert result.iterations > alone.iterations  # both tries counted
 
 
-def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Setup, setup, monkeypatch) -> None:
-    """A knot the per-knot IK missed leaves the warm start centimetres off the sphere: the small
-    barrier has no feasible point to stay near, so a failed solve is not tried again."""
+def _failing_tries(monkeypatch) -> tuple[list, list]:
+    """Make every trajectory NLP solve end infeasible (after really running it); the lists its
+    tries' initial barriers (None: IPOPT's default) and iteration budgets are recorded in."""
     from optlight.planning import trajectory
 
-    _, _, path, warm = setup
     real = trajectory.TrajectoryOptimizer.solve
-    barriers, budgets = [], []
+    barriers: list = []
+    budgets: list = []
 
     def fails(self, path_, sphere, theta0, fixed_start=False):
         barriers.append(self.options.get("ipopt.mu_init"))
@@ -297,6 +297,16 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
         return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
+    return barriers, budgets
+
+
+def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Setup, setup, monkeypatch) -> None:
+    """A knot the per-knot IK missed leaves the warm start centimetres off the sphere: the small
+    barrier has no feasible point to stay near, so a failed solve is not tried again."""
+    from optlight.planning import trajectory
+
+    _, _, path, warm = setup
+    barriers, budgets = _failing_tries(monkeypatch)
     free = replace(small_setup, environment=None)
     assert trajectory._warm_start_on_sphere(free, path, warm)
     missed = warm.copy()
@@ -317,15 +327,7 @@ def test_with_a_fallback_to_follow_the_first_try_has_its_budget_and_no_retry(
     from optlight.planning import trajectory
 
     _, _, path, warm = setup
-    real = trajectory.TrajectoryOptimizer.solve
-    barriers, budgets = [], []
-
-    def fails(self, path_, sphere, theta0, fixed_start=False):
-        barriers.append(self.options.get("ipopt.mu_init"))
-        budgets.append(self.options["ipopt.max_iter"])
-        return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
-
-    monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
+    barriers, budgets = _failing_tries(monkeypatch)
     free = replace(small_setup, environment=None)
     missed = warm.copy()
     missed[3] += 0.05  # off the sphere: no retry either way
