@@ -230,7 +230,7 @@ def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
 def landmark_jobs(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
     """The landmark figures of a results folder (:func:`~optlight.viz.figures.landmark_figures`);
     none for a light set, which has no sweep or reference."""
-    return landmark_figures(landmarks, scene) if landmarks.mode != "set" else {}
+    return landmark_figures(landmarks, scene) if _landmark_figure_names(landmarks) else {}
 
 
 def _landmark_figure_names(landmarks: LandmarkSet) -> tuple[str, ...]:
