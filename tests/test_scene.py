@@ -219,6 +219,39 @@ def test_a_pickled_scene_casts_the_same_shadows(default_scene: Scene) -> None:
     np.testing.assert_array_equal(copy.visibility(light), shadows)
 
 
+@pytest.mark.parametrize("model", ["directional", "point"])
+def test_a_calibrated_scene_casts_shadows_from_its_own_normals(default_scene: Scene, model: str) -> None:
+    """Calibrated normals and light model (the scene's shadow origins are built once, so a
+    calibrated scene must build its own): against rays cast here from p + ε n' towards the light,
+    n' the calibrated normals, where n'·l > 0 (a point light's only for hits nearer than the light)."""
+    from optlight.scene import SHADOW_EPSILON
+
+    rng = np.random.default_rng(8)
+    gb = default_scene.gbuffer
+    tilted = gb.normals + rng.normal(scale=0.3, size=gb.normals.shape)
+    tilted /= np.linalg.norm(tilted, axis=1, keepdims=True)
+    light = dataclasses.replace(default_scene.light, model=model)
+    calibrated = default_scene.calibrated(light, gb.albedo, tilted)
+    a = default_scene.sphere.position(0.7, 2.5)
+    axis = a - default_scene.sphere.center
+    to_light = a - gb.points if model == "point" else np.broadcast_to(axis, gb.points.shape)
+    distance = np.linalg.norm(to_light, axis=1)
+    direction = to_light / distance[:, None]
+    lit = np.einsum("ij,ij->i", tilted, direction) > 0
+    epsilon = SHADOW_EPSILON * float(default_scene.mesh.scale)
+    origins = gb.points + epsilon * tilted
+    caster = RayCaster(default_scene.mesh)
+    if model == "point":
+        hit = caster.first_hit_distances(origins[lit], direction[lit]) < distance[lit] - epsilon
+    else:
+        hit = caster.any_hits(origins[lit], direction[lit])
+    expected = np.ones(gb.size)
+    expected[np.flatnonzero(lit)[hit]] = 0.0
+    got = calibrated.visibility(a)
+    assert 100 < (got == 0).sum() and (got != default_scene.visibility(a)).sum() > 10  # the normals matter
+    np.testing.assert_array_equal(got, expected)
+
+
 def test_gbuffer_points_lie_on_pixel_rays_and_surface(default_scene: Scene) -> None:
     gb, cam = default_scene.gbuffer, default_scene.camera
     assert (

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
-from optlight.scene.gbuffer import GBuffer, RayCaster, build_gbuffer, shadow_visibility
+from optlight.scene.gbuffer import GBuffer, RayCaster, ShadowRays, build_gbuffer
 from optlight.scene.luminance import luminance_function
 from optlight.scene.objects import SceneObject, build_object
 from optlight.scene.render import shade, to_image
@@ -80,7 +80,7 @@ class Scene:
                 "a camera that sees the object (no pixel ray hits it)",
                 camera.position.tolist(),
             )
-        self._shadow_epsilon = SHADOW_EPSILON * float(obj.mesh.scale)
+        self._shadows = self._shadow_rays()
         self._luminance: dict[bool, ca.Function] = {}
         #: γ of the camera response s·(I/s)^(1/γ) applied to every rendered value (1: linear); only a
         #: calibrated scene (:meth:`calibrated`) has another.
@@ -131,18 +131,17 @@ class Scene:
     def visibility(self, light_position: ArrayLike) -> Array:
         """Cast-shadow visibility v (P,) in {0., 1.} for a light at ``light_position`` (world, m),
         or (S, P) for S lights (S, 3), from shadow rays
-        (:func:`optlight.scene.gbuffer.shadow_visibility`); all ones when ``light.cast_shadows`` is
-        false."""
+        (:meth:`optlight.scene.gbuffer.ShadowRays.visibility`); all ones when ``light.cast_shadows``
+        is false."""
         if not self.light.cast_shadows:
             return np.ones((*np.shape(light_position)[:-1], self.gbuffer.size))
-        return shadow_visibility(
-            self._caster,
-            self.gbuffer,
-            light_position,
-            self.light.model,
-            self.sphere.center,
-            self._shadow_epsilon,
-        )
+        return self._shadows.visibility(light_position)
+
+    def _shadow_rays(self) -> ShadowRays:
+        """The shadow rays of this scene's G-buffer and light model, their origins offset by
+        :data:`SHADOW_EPSILON` times the object's scale."""
+        epsilon = SHADOW_EPSILON * float(self.mesh.scale)
+        return ShadowRays(self._caster, self.gbuffer, self.light.model, self.sphere.center, epsilon)
 
     def pixels(
         self,
@@ -199,6 +198,7 @@ class Scene:
         scene.gbuffer = dataclasses.replace(gb, albedo=new_albedo, normals=new_normals)
         scene.response_gamma = float(response_gamma)
         scene._luminance = {}
+        scene._shadows = scene._shadow_rays()  # the normals and the light model may have changed
         return scene
 
     def _respond(self, value: Any) -> Any:
