@@ -411,3 +411,34 @@ def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
             ours = options["hess_lag"](*args).full()
             theirs = reference.get_function("nlp_hess_l")(*args).full()
             np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())
+
+
+def test_knot_maps_on_threads_give_the_serial_maps_values(small_setup: Setup, monkeypatch) -> None:
+    """:func:`~optlight.planning.nlp.knot_map` splits the knots over the threads (CasADi's ThreadMap)
+    from THREADED_KNOTS knots on, and not with one thread: the knot rows, their Jacobian and their
+    Hessian are those of the serial map, to the bit."""
+    from optlight.planning.nlp import THREADED_KNOTS, knot_map, row_hessian
+
+    robot = small_setup.robot
+    rows = small_setup.environment.view_cone_function(robot)
+    hessian = row_hessian(rows)
+    count = THREADED_KNOTS + 3
+    rng = np.random.default_rng(9)
+    theta = robot.theta_ref[:, None] + rng.normal(scale=0.4, size=(robot.n, count))
+    lam = rng.uniform(0.0, 1.0, size=(rows.size1_out(0), count))
+    x = ca.MX.sym("x", robot.n, count)
+
+    def values(threads: str) -> list[np.ndarray]:
+        monkeypatch.setenv("OMP_NUM_THREADS", threads)
+        mapped, hessians = knot_map(rows, count), knot_map(hessian, count)
+        # on threads: a ThreadMap, or one in an MXFunction with a serial map of the knots left over
+        kinds = {"ThreadMap", "MXFunction"} if threads == "2" else {"Map"}
+        assert {mapped.class_name(), hessians.class_name()} <= kinds
+        assert knot_map(rows, THREADED_KNOTS - 1).class_name() == "Map"
+        jacobian = ca.Function("rows_jacobian", [x], [ca.jacobian(ca.vec(mapped(x)), ca.vec(x))])
+        return [np.asarray(f) for f in (mapped(theta), jacobian(theta).full(), hessians(theta, lam))]
+
+    serial, threaded = values("1"), values("2")
+    assert np.abs(serial[1]).max() > 0.1  # the rows depend on the angles
+    for a, b in zip(serial, threaded, strict=True):
+        np.testing.assert_array_equal(a, b)

@@ -44,6 +44,7 @@ from optlight.planning.nlp import (
     environment_rows,
     knot_bounds,
     knot_hessian,
+    knot_map,
     knot_nlp_options,
     light_rows,
     pin_rows,
@@ -191,7 +192,7 @@ class TrajectoryOptimizer:
         center, radius, theta_ref = p[0:3], p[3], p[4 : 4 + n]
         per_knot = ca.reshape(p[4 + n : 4 + n + 18 * n_knots], 18, n_knots)
         theta = ca.horzcat(p[4 + n + 18 * n_knots :], variables) if fixed_start else variables
-        mapped = self._knot_fn.map(n_knots)
+        mapped = knot_map(self._knot_fn, n_knots)
         g_all = mapped(
             theta,
             ca.repmat(center, 1, n_knots),
