@@ -360,15 +360,18 @@ def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Set
     assert len(tries) == 2 and tries[1].success and result.success and tries[1].iterations > 3
 
 
-def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
-    """Our Hessian of the Lagrangian (knot by knot, :func:`optlight.planning.nlp.knot_hessian`)
-    against the one CasADi derives from the whole NLP, at random points and multipliers: the
-    trajectory NLP with clearance and view rows (arc rows, a fixed start, a knot off the sphere) and
-    the transfer NLP, each with every row at every knot and with some (knot, row) pairs only."""
+def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
+    """Our Hessian of the Lagrangian and Jacobian of the constraints (knot by knot,
+    :func:`optlight.planning.nlp.knot_derivatives`) against those CasADi derives from the whole NLP,
+    at random points and multipliers: the trajectory NLP with clearance and view rows (arc rows, a
+    fixed start, a knot off the sphere), the transfer NLP and the clear-posture NLP of a row set,
+    each with every row at every knot and with some (knot, row) pairs only. The Jacobian has
+    CasADi's sparsity, so IPOPT's linear algebra is the same."""
     from conftest import reduced_problem
 
-    from optlight.planning import trajectory
+    from optlight.planning import placement, trajectory
     from optlight.planning.nlp import environment_rows
+    from optlight.planning.placement import ClearPosture
 
     setup = Setup.from_problem(reduced_problem("table_wall"))
     env, robot = setup.environment, setup.robot
@@ -396,11 +399,14 @@ def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
     ends, initial = (robot.theta_ref, robot.theta_ref + 0.3), robot.theta_ref + np.zeros((4, 1))
     trajectory._transfer_nlp(setup, rows, *ends, initial)
     trajectory._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
-    assert len(captured) == 6
+    posture = ClearPosture(setup, env)
+    monkeypatch.setattr(placement.ca, "nlpsol", capture)
+    posture._solver(np.random.default_rng(6).random((1, env.clearance_function(robot).size1_out(0))) < 0.2, False)
+    assert len(captured) == 7
     rng = np.random.default_rng(4)
     for nlp, options in captured:
         reference = real("reference", "ipopt", nlp, {"ipopt.print_level": 0, "print_time": False})
-        assert nlp["g"].size1() > 100  # the environment's rows are in it
+        assert nlp["g"].size1() > 50  # the environment's rows are in it
         for _ in range(3):
             args = [
                 robot.theta_ref.tolist() * (nlp["x"].size1() // robot.n) + rng.normal(scale=0.3, size=nlp["x"].size1()),
@@ -411,6 +417,11 @@ def test_the_nlps_hessian_is_casadis_own(monkeypatch) -> None:
             ours = options["hess_lag"](*args).full()
             theirs = reference.get_function("nlp_hess_l")(*args).full()
             np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12 * np.abs(theirs).max())
+            (g, jacobian), (g_ref, jacobian_ref) = (f(*args[:2]) for f in (options["jac_g"], reference.get_function("nlp_jac_g")))
+            np.testing.assert_array_equal(g.full(), g_ref.full())
+            assert jacobian.sparsity() == jacobian_ref.sparsity() and jacobian.nnz() > 0
+            ours, theirs = (np.asarray(j.nonzeros()) for j in (jacobian, jacobian_ref))
+            np.testing.assert_allclose(ours, theirs, rtol=1e-14, atol=1e-14 * np.abs(theirs).max())
 
 
 def test_knot_maps_on_threads_give_the_serial_maps_values(small_setup: Setup, monkeypatch) -> None:

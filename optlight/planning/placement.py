@@ -87,7 +87,7 @@ from optlight.planning.nlp import (
     environment_rows,
     ipopt_options,
     knot_bounds,
-    knot_hessian,
+    knot_derivatives,
     light_rows,
     pin_rows,
     run,
@@ -456,10 +456,11 @@ class ClearPosture:
     with the rows: among the scaling benchmark's 3 obstacles ~26 of its 206 clearance rows are near
     a posture, and the 186 clear-posture solves of its 144 captures took 3.6 s instead of 6.0 s (the
     576 captures': 12.9 s instead of 21.8 s). One NLP per row set, built on first use and kept
-    (:data:`SOLVERS_KEPT`), with the exact Hessian of :func:`~optlight.planning.nlp.knot_hessian`:
-    an MX graph over the environment's functions, ~3 ms to build where CasADi's own expanded
-    Hessian of a row set took ~25 ms. Without clearance rows (the view cone alone, as on the default
-    face) the one NLP has every row, expanded to SX as before.
+    (:data:`SOLVERS_KEPT`), with the exact Hessian and the Jacobian of
+    :func:`~optlight.planning.nlp.knot_derivatives`: MX graphs over the environment's functions,
+    ~9 ms to build on collision where CasADi generating the Jacobian took ~23 ms and its own expanded
+    Hessian of a row set ~25 ms. Without clearance rows (the view cone alone, as on the default face)
+    the one NLP has every row, expanded to SX as before.
     """
 
     def __init__(self, setup: Setup, environment: Environment) -> None:
@@ -525,8 +526,8 @@ class ClearPosture:
         self, theta: ca.MX, p: ca.MX, active: NDArray[np.bool_], options: dict[str, Any]
     ) -> tuple[ca.Function, int]:
         """The NLP with the clearance rows ``active`` (1, m) and the view rows, as MX over the
-        environment's functions with :func:`~optlight.planning.nlp.knot_hessian` (many builds, one
-        per row set: ~3 ms each, against ~25 ms expanded with CasADi's Hessian); its number of
+        environment's functions with :func:`~optlight.planning.nlp.knot_derivatives` (many builds,
+        one per row set: ~9 ms each, against ~25 ms expanded with CasADi's Hessian); its number of
         environment rows."""
         robot, environment = self.robot, self.environment
         n = robot.n
@@ -544,9 +545,9 @@ class ClearPosture:
             parts.append(part)
         g = ca.vertcat(*blocks)
         cost = ca.sumsqr(theta - theta0)
-        hessian = knot_hessian(theta, p, cost, g.size1(), parts)
         nlp = {"x": theta, "p": p, "f": cost, "g": g}
-        return ca.nlpsol("clear_posture", "ipopt", nlp, {**options, "hess_lag": hessian}), g.size1() - 5
+        derivatives = knot_derivatives(theta, p, cost, g, parts)
+        return ca.nlpsol("clear_posture", "ipopt", nlp, {**options, **derivatives}), g.size1() - 5
 
     def solve(
         self, target: ArrayLike, theta0: ArrayLike, warm: ArrayLike | None = None

@@ -43,7 +43,7 @@ from optlight.planning.nlp import (
     arc_rows,
     environment_rows,
     knot_bounds,
-    knot_hessian,
+    knot_derivatives,
     knot_map,
     knot_nlp_options,
     light_rows,
@@ -162,7 +162,8 @@ class TrajectoryOptimizer:
         self.active = active
         self.view = view
         self.view_mode = view_mode
-        # the exact Hessian, knot by knot (knot_hessian): the knot rows are small SX graphs
+        # the exact Hessian and the Jacobian, knot by knot (knot_derivatives): the knot rows are
+        # small SX graphs
         self.options = knot_nlp_options(solver or SolverSpec(), ipopt__constr_viol_tol=1e-9)
         if retry:  # why these two: optimize_knots
             self.options["ipopt.mu_init"] = WARM_MU_INIT
@@ -246,9 +247,9 @@ class TrajectoryOptimizer:
             ],
             knot_index[:, free],
         )
-        hessian = knot_hessian(variables, p, cost, g.size1(), [knot_rows, *environment])
+        derivatives = knot_derivatives(variables, p, cost, g, [knot_rows, *environment])
         nlp = {"x": ca.vec(variables), "p": p, "f": cost, "g": g}
-        return ca.nlpsol("trajectory_nlp", "ipopt", nlp, {**self.options, "hess_lag": hessian})
+        return ca.nlpsol("trajectory_nlp", "ipopt", nlp, {**self.options, **derivatives})
 
     def _active_at(self, n_knots: int, knots: list[int]) -> NDArray[np.bool_] | None:
         """The rows of :attr:`active` at ``knots`` of a path of ``n_knots`` knots (None: all)."""
@@ -615,7 +616,7 @@ def _transfer_nlp(
     g, rows = selected_rows(row_function, x, range(inner), 0, active)
     cost = ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps)
     options = knot_nlp_options(setup.solver)
-    options["hess_lag"] = knot_hessian(x, ca.vec(ends), cost, g.size1(), [rows])
+    options.update(knot_derivatives(x, ca.vec(ends), cost, g, [rows]))
     solver = ca.nlpsol("transfer", "ipopt", {"x": ca.vec(x), "p": ca.vec(ends), "f": cost, "g": g}, options)
     lower, upper = (np.tile(bound, inner) for bound in knot_bounds(setup.robot))
     x0 = np.clip(initial.ravel(), lower, upper)  # knot by knot, as ca.vec(x) stacks them
