@@ -267,13 +267,19 @@ def knot_derivatives(variables: Symbolic, p: Symbolic, f: Symbolic, g: Symbolic,
     }
 
 
+def _on_sx(function: ca.Function) -> tuple[ca.Function, ca.SX, list[ca.SX]]:
+    """A knot function as SX (expanded when it is MX) and SX symbols for its inputs: θ (its first)
+    and the others, for :func:`row_jacobian` and :func:`row_hessian` to differentiate."""
+    sx = function.expand() if function.is_a("MXFunction") else function
+    theta = ca.SX.sym("theta", sx.size1_in(0))
+    return sx, theta, [ca.SX.sym(f"arg{i}", sx.sparsity_in(i)) for i in range(1, sx.n_in())]
+
+
 @functools.lru_cache(maxsize=64)
 def row_jacobian(function: ca.Function) -> ca.Function:
     """(θ, *args) → ∂ function(θ, *args) / ∂θ (r × n, θ its first input), on the function's SX graph;
     built once per function, as :func:`row_hessian`."""
-    sx = function.expand() if function.is_a("MXFunction") else function
-    theta = ca.SX.sym("theta", sx.size1_in(0))
-    args = [ca.SX.sym(f"arg{i}", sx.sparsity_in(i)) for i in range(1, sx.n_in())]
+    sx, theta, args = _on_sx(function)
     return ca.Function(f"{sx.name()}_jacobian", [theta, *args], [ca.jacobian(sx(theta, *args), theta)])
 
 
@@ -281,9 +287,7 @@ def row_jacobian(function: ca.Function) -> ca.Function:
 def row_hessian(function: ca.Function) -> ca.Function:
     """(θ, *args, λ) → ∇²_θ (λᵀ function(θ, *args)) (n × n, θ its first input), on the function's SX
     graph; built once per function (the knot rows of a robot, an environment's row selection)."""
-    sx = function.expand() if function.is_a("MXFunction") else function
-    theta = ca.SX.sym("theta", sx.size1_in(0))
-    args = [ca.SX.sym(f"arg{i}", sx.sparsity_in(i)) for i in range(1, sx.n_in())]
+    sx, theta, args = _on_sx(function)
     out = sx(theta, *args)
     lam = ca.SX.sym("lam", out.size1())
     hessian = ca.hessian(ca.dot(lam, out), theta)[0]
