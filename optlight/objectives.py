@@ -72,6 +72,11 @@ _LOG_SPAN = 600.0
 #: Kernel sums one piece of :meth:`SoftHistogram.numpy` works on (rows × pixels): its arrays stay in
 #: cache (2^15 measured fastest on a 256² image and on a batch of 32 64² images).
 _PIECE = 2**15
+#: Longest reach (S − 1)δ of a chain of products in :meth:`SoftHistogram.casadi`, and the bound
+#: on |x| there, in units of ``a``: products, and the adjoints of the reverse derivative, stay below
+#: e^(2 · 27 · 12) = e^648 (float64 ends at e^709); what the bound leaves out is below e^−(27 − 12)².
+_CHAIN_REACH = 12.0
+_CHAIN_BOUND = 27.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -166,10 +171,44 @@ class SoftHistogram:
         return padded[:, half : half + bins]
 
     def casadi(self, u: ca.MX) -> ca.MX:
-        """Histogram of the column ``u`` (P×1) as a K×1 MX: one P×K kernel matrix, summed by rows."""
-        p = u.size1()
-        d = (ca.repmat(u, 1, self.bins) - ca.repmat(ca.DM(self.centres).T, p, 1)) / self.sigma
-        h = ca.sum1(ca.exp(-0.5 * d * d)).T
+        """Histogram of the column ``u`` (P×1) as a K×1 MX: the kernel sums of :meth:`numpy`, bin
+        after bin along a chain of products instead of one exponential per pixel and bin (float64
+        ``exp`` was most of the objective's time: 0.52 of 0.59 ms on the default face's 1,840
+        search pixels).
+
+        With ``a``, ``b_k``, ``δ`` as in :meth:`numpy`, the bins are cut into equal segments of at
+        most ``S`` bins, ``(S − 1)δ ≤ R_max`` (:data:`_CHAIN_REACH`); in the segment from bin ``j``,
+        with ``x_i = a_i − b_j`` bounded to ``[−X, X]`` (:data:`_CHAIN_BOUND`),
+
+            exp(−(a_i − b_{j+m})²) = exp(−m²δ²) · v_i,m,    v_i,m = exp(−x_i²) · R_iᵐ,   R_i = exp(2δ x_i),
+
+        so a segment takes two exponentials per pixel, one product per pixel and bin (v_i,m =
+        v_i,m−1 R_i) and the constant ``exp(−m²δ²)`` once the pixels are summed. ``v_i,m ≤
+        exp(R_max²)``, and the reverse derivative's adjoints, which carry ``R_iᵐ``, stay below
+        ``exp(2 X R_max)``; a pixel farther than X from a segment's first bin adds less than
+        ``exp(−(X − R_max)²)`` to its bins (e^−225), and nothing to the gradient. Where segments
+        would be shorter than 3 bins (``δ`` > 6, ``sigma_bins`` < 0.12) every bin takes its own
+        exponential, ``exp(−(a_i − b_k)²)``. Within 1e-12 of the kernel matrix, relative, and so is
+        the gradient (tested)."""
+        delta = math.sqrt(0.5) / self.sigma_bins
+        a = u * (math.sqrt(0.5) / self.sigma)
+        longest = 1 + math.floor(_CHAIN_REACH / delta)
+        if longest < 3:
+            longest = 1
+        span = math.ceil(self.bins / math.ceil(self.bins / longest))  # equal segments: short chains
+        sums = []
+        for j in range(0, self.bins, span):
+            x = a - (j + 0.5) * delta
+            if span == 1:
+                sums.append(ca.sum1(ca.exp(-x * x)))
+                continue
+            x = ca.fmax(ca.fmin(x, _CHAIN_BOUND), -_CHAIN_BOUND)
+            v, r = ca.exp(-x * x), ca.exp(2 * delta * x)
+            sums.append(ca.sum1(v))
+            for m in range(1, min(span, self.bins - j)):
+                v = v * r
+                sums.append(ca.sum1(v) * math.exp(-((m * delta) ** 2)))
+        h = ca.vertcat(*sums)
         return h / ca.sum1(h)
 
 
