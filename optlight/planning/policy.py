@@ -142,33 +142,46 @@ def place_landmarks(
     Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons),
     unless ``[landmarks] allow_partial``, which drops it with a warning.
     """
-    reacher = reacher if reacher is not None else Reacher(setup)
-    rule = replacement if replacement is not None else AzimuthPlacement(setup, reacher)
-    robot = setup.robot
-    kept: list[Landmark] = []
-    thetas: list[Array] = []
-    notes: list[str] = []
-    previous = robot.theta_ref
+    chain = PlacementChain(setup, reacher, replacement=replacement)
     for lm in landmarks:
+        chain.add(lm)
+    return chain.finish()
+
+
+class PlacementChain:
+    """:func:`place_landmarks` one landmark at a time, in their order: :meth:`add` places the next
+    (from the previous one's angles), :meth:`finish` ends the chain (its backward pass). The
+    placement of a landmark needs only the landmarks before it, so a chain can follow a search that
+    finds them one by one (:class:`~optlight.pipeline.PlacementAhead`)."""
+
+    def __init__(self, setup: Setup, reacher: Reacher | None = None, *, replacement: Replacement | None = None):
+        self.setup = setup
+        self.reacher = reacher if reacher is not None else Reacher(setup)
+        self.rule = replacement if replacement is not None else AzimuthPlacement(setup, self.reacher)
+        self.kept: list[Landmark] = []
+        self.thetas: list[Array] = []
+        self.notes: list[str] = []
+        self.previous = setup.robot.theta_ref
+
+    def add(self, lm: Landmark) -> None:
+        """Place ``lm`` after the landmarks added before it (:func:`place_landmarks`); raises
+        :class:`UnreachableError` as it does."""
+        setup, robot = self.setup, self.setup.robot
         attempts = []
-        for start, restarts in ((previous, False), (robot.theta_ref, True)):
-            attempts.append(reacher.attempt(lm.position, start, restarts=restarts))
+        for start, restarts in ((self.previous, False), (robot.theta_ref, True)):
+            attempts.append(self.reacher.attempt(lm.position, start, restarts=restarts))
             if attempts[-1].theta is not None:
                 break
         clear = attempts[-1].theta
         if clear is not None:
-            kept.append(lm)
-            thetas.append(clear)
-            previous = clear
-            continue
+            self._keep(lm, clear)
+            return
         attempts.sort(key=lambda a: (not a.ik.success, -a.clearance if a.ik.success else a.ik.residual))
-        found = rule(lm, attempts, previous)
+        found = self.rule(lm, attempts, self.previous)
         if not isinstance(found, str):
-            kept.append(found[0])
-            thetas.append(found[1])
-            previous = found[1]
-            notes.append(f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {found[2]}")
-            continue
+            self._keep(found[0], found[1])
+            self.notes.append(f"landmark {lm.index} (azimuth {np.rad2deg(lm.azimuth):.1f}°) {found[2]}")
+            return
         best = attempts[0]
         why = (
             f"out of reach of {robot.name}: {best.ik.message}"
@@ -184,10 +197,19 @@ def place_landmarks(
             raise UnreachableError(
                 f"{where}; move the robot base ([robot] base_position_m) or set [landmarks] allow_partial = true"
             )
-        notes.append(f"dropped {where}")
-    if not kept:
-        raise UnreachableError(f"no landmark is reachable by {robot.name}")
-    return LandmarkPlacement(tuple(kept), _follow_back(reacher, kept, np.array(thetas)), tuple(notes))
+        self.notes.append(f"dropped {where}")
+
+    def _keep(self, lm: Landmark, theta: Array) -> None:
+        self.kept.append(lm)
+        self.thetas.append(theta)
+        self.previous = theta
+
+    def finish(self) -> LandmarkPlacement:
+        """The placement of the landmarks added; raises :class:`UnreachableError` when none is kept."""
+        if not self.kept:
+            raise UnreachableError(f"no landmark is reachable by {self.setup.robot.name}")
+        thetas = _follow_back(self.reacher, self.kept, np.array(self.thetas))
+        return LandmarkPlacement(tuple(self.kept), thetas, tuple(self.notes))
 
 
 def why_moved(setup: Setup, best: Attempt) -> str:
