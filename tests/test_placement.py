@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 import warnings
 from typing import Any
 
@@ -15,12 +16,14 @@ import pytest
 from conftest import REACH_ONLY, reduced_problem
 
 import optlight
+from optlight import pipeline as pipeline_module
 from optlight.errors import UnreachableError
 from optlight.geometry import h_residual
+from optlight.pipeline import PlacementAhead
 from optlight.planning import placement as placement_module
 from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
 from optlight.planning.placement import LightPlacement, PlacementResult
-from optlight.planning.policy import Reacher, place_landmarks
+from optlight.planning.policy import PlacementChain, Reacher, place_landmarks
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -285,8 +288,60 @@ def test_the_pipeline_plans_through_moved_landmarks(low: Case) -> None:
     assert len(moved) == 2 and all(any(m == str(w.message) for w in caught) for m in moved)
 
 
-def test_azimuth_out_of_reach_is_named_or_dropped() -> None:
-    """From 20° zenith up, the low base reaches only the 270° azimuth of four."""
+def placed_in_threads(monkeypatch: pytest.MonkeyPatch, threads: int) -> set[str]:
+    """The names of the threads landmarks are placed in from now on (the chain's forward pass), with
+    ``threads`` threads to use."""
+    monkeypatch.setattr(pipeline_module, "thread_count", lambda: threads)
+    names: set[str] = set()
+    real = PlacementChain.add
+
+    def add(self: PlacementChain, lm: Any) -> None:
+        names.add(threading.current_thread().name)
+        real(self, lm)
+
+    monkeypatch.setattr(PlacementChain, "add", add)
+    return names
+
+
+def offered_and_placed(case: Case, offered: Any, captures: Any) -> Any:
+    with PlacementAhead(case.setup, Reacher(case.setup)) as ahead:
+        for lm in offered:
+            ahead.offer(lm)
+        return ahead.placement(captures)
+
+
+def test_the_placement_ahead_places_in_its_thread_what_place_landmarks_places(
+    low: Case, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The chain run ahead of the search (two of the eight landmarks moved along their azimuth by the
+    placement NLP there) gives the same angles and notes as place_landmarks; when the captures are
+    not the landmarks offered (one merged away) they are placed again in the caller's thread; with
+    one thread nothing runs ahead."""
+    landmarks = low.landmarks.landmarks
+    names = placed_in_threads(monkeypatch, 2)
+    expected = place_landmarks(low.setup, landmarks)
+    assert sum(lm.status == "placed" for lm in expected.landmarks) == 2
+    for offered, captures, threads in [
+        (landmarks, landmarks, {"optlight_placement"}),
+        (landmarks, landmarks[1:], {"optlight_placement", "MainThread"}),
+    ]:
+        names.clear()
+        got = offered_and_placed(low, offered, captures)
+        want = expected if len(captures) == len(landmarks) else place_landmarks(low.setup, captures)
+        assert names == threads
+        assert [(lm.index, lm.zenith, lm.status) for lm in got.landmarks] == [
+            (lm.index, lm.zenith, lm.status) for lm in want.landmarks
+        ]
+        np.testing.assert_array_equal(got.thetas, want.thetas)
+        assert got.warnings == want.warnings
+    names = placed_in_threads(monkeypatch, 1)
+    np.testing.assert_array_equal(offered_and_placed(low, landmarks, landmarks).thetas, expected.thetas)
+    assert names == {"MainThread"}
+
+
+def test_azimuth_out_of_reach_is_named_or_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
+    """From 20° zenith up, the low base reaches only the 270° azimuth of four; the placement run
+    ahead of the search raises the same error, once asked for the placement."""
     case = Case(
         small_problem(count=4, robot={"base_position_m": LOW_BASE}, light_sphere={"zenith_min_deg": 20.0})
     )
@@ -295,8 +350,12 @@ def test_azimuth_out_of_reach_is_named_or_dropped() -> None:
         UnreachableError,
         match=r"landmark 0 \(zenith 20\.0°, azimuth 0\.0°\) is out of reach of panda: .*; nor is any light "
         r"on its azimuth within zenith 20\.0–60\.0° \(placement NLP: ",
-    ):
+    ) as sequential:
         place_landmarks(case.setup, landmarks)
+    names = placed_in_threads(monkeypatch, 2)
+    with pytest.raises(UnreachableError) as ahead:
+        offered_and_placed(case, landmarks, landmarks)
+    assert str(ahead.value) == str(sequential.value) and names == {"optlight_placement"}
     partial = small_problem(
         count=4,
         robot={"base_position_m": LOW_BASE},

@@ -473,16 +473,20 @@ class _Search:
         return lm, histogram, self.scene.visibility(position) if mask is None else mask
 
 
-def find_landmarks(setup: Setup, *, progress: Progress | None = None) -> LandmarkSet:
+def find_landmarks(
+    setup: Setup, *, progress: Progress | None = None, found: Callable[[Landmark], None] | None = None
+) -> LandmarkSet:
     """The landmarks of a built problem (``[landmarks]``, ``[objective]``, ``[solver]``): see the
     module docstring. ``progress(done, total)`` is called after each azimuth (azimuth mode) or each
-    sweep row and landmark (free mode)."""
+    sweep row and landmark (free mode); ``found(landmark)`` with each landmark as it is found, in
+    the order of the result (e.g. to place it meanwhile, :class:`~optlight.pipeline.PlacementAhead`)."""
     t0 = time.perf_counter()
     search = _Search(setup)
+    found = found or (lambda landmark: None)
     if search.spec.mode == "azimuth":
-        landmarks, histograms, visibilities, grid = _azimuth_mode(search, progress)
+        landmarks, histograms, visibilities, grid = _azimuth_mode(search, progress, found)
     else:
-        landmarks, histograms, visibilities, grid = _free_mode(search, progress)
+        landmarks, histograms, visibilities, grid = _free_mode(search, progress, found)
     return LandmarkSet(
         landmarks=tuple(landmarks),
         mode=search.spec.mode,
@@ -567,7 +571,7 @@ def distinct_landmarks(landmarks: Sequence[Landmark], tolerance: float) -> tuple
 _Found = tuple[list[Landmark], list[Array], list[Array], CostGrid]
 
 
-def _azimuth_mode(search: _Search, progress: Progress | None) -> _Found:
+def _azimuth_mode(search: _Search, progress: Progress | None, found: Callable[[Landmark], None]) -> _Found:
     spec = search.spec
     refiner = ZenithSearch(search.search, search.search_objective, search.sphere)
     zenith = _sweep_zeniths(search, math.radians(spec.sweep_step_deg))
@@ -629,6 +633,7 @@ def _azimuth_mode(search: _Search, progress: Progress | None) -> _Found:
         landmarks.append(lm)
         histograms.append(hist)
         visibilities.append(mask)
+        found(lm)
         if progress is not None:
             progress(j + 1, spec.count)
     return landmarks, histograms, visibilities, CostGrid(zenith, azimuth, costs)
@@ -650,7 +655,7 @@ def _sweep_zeniths(search: _Search, step: float) -> Array:
     return np.unique(np.r_[full, search.sphere.zenith_min])
 
 
-def _free_mode(search: _Search, progress: Progress | None) -> _Found:
+def _free_mode(search: _Search, progress: Progress | None, found: Callable[[Landmark], None]) -> _Found:
     spec = search.spec
     step = math.radians(spec.sweep_step_deg)
     separation = math.radians(spec.min_separation_deg)
@@ -698,6 +703,7 @@ def _free_mode(search: _Search, progress: Progress | None) -> _Found:
         histograms.append(hist)
         visibilities.append(mask)
         accepted.append(direction_in_sphere_frame(lm.zenith, lm.azimuth))
+        found(lm)
         if progress is not None:
             progress(azimuth.size + len(landmarks), total)
     if len(landmarks) < spec.count:
