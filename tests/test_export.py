@@ -463,3 +463,9 @@ def test_trajectory_files_are_the_text_of_value_by_value_formatting(tmp_path) ->
     odd = np.array([[1e-05, 1.5e-07, -0.0, 0.1, 1e16, 123456789.123, 5e-324, -1.7976931348623157e308]])
     assert _yaml_rows(odd) == ["[" + ", ".join(_yaml_float(v) for v in odd[0]) + "]"]
     assert _yaml_rows(odd)[0].startswith("[1.0e-05, 1.5e-07, -0.0, 0.1, 1.0e+16, ")
+    # the digits are orjson's and the notation repr's: on both sides of where their notations part
+    # (1e-4, 1e16) and over every magnitude a double takes, each text is _yaml_float's
+    rng = np.random.default_rng(7)
+    edges = [np.nextafter(1e-4, 0.0), 1e-4, np.nextafter(1e16, 0.0), 1e16]
+    many = np.r_[edges, rng.choice([-1.0, 1.0], 60_000) * 10.0 ** rng.uniform(-320, 308, 60_000)].reshape(-1, 4)
+    assert _yaml_rows(many) == ["[" + ", ".join(_yaml_float(v) for v in row) + "]" for row in many]
