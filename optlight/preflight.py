@@ -28,6 +28,6 @@ def preflight(problem: Problem) -> Setup:
     setup = Setup.from_problem(problem)
     if problem.robot.urdf is not None:
         # read after the solve (preview, view check, environment): a user URDF's meshes must load now
-        setup.robot.geometry_model("visual")
+        setup.robot.geometry_model("visual", read_meshes=True)
         setup.robot.geometry_model("collision")
     return setup

@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import casadi as ca
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -18,6 +19,7 @@ from optlight.robot.kinematics import symbolic_frame_pose
 from optlight.robot.loading import (
     ROBOTS,
     JointCoordinates,
+    _unread_visual_meshes,
     example_robot_data_dir,
     find_package,
     placement,
@@ -208,6 +210,64 @@ def test_package_lookup_follows_ros_conventions(tmp_path: Path, monkeypatch: pyt
     assert find_package("cell_description", elsewhere) == package
     monkeypatch.setenv("ROS_PACKAGE_PATH", str(package))  # the entry is the package itself
     assert find_package("cell_description", elsewhere) == package
+
+
+def _same_visuals(unread: pin.GeometryModel, read: pin.GeometryModel) -> None:
+    """The visual objects as pinocchio reads them, but for the mesh data: names, joints, frames,
+    placements, files, scales, colours, and the primitives' shapes."""
+    assert [g.name for g in unread.geometryObjects] == [g.name for g in read.geometryObjects]
+    for a, b in zip(unread.geometryObjects, read.geometryObjects, strict=True):
+        assert (a.parentJoint, a.parentFrame, a.meshPath, a.overrideMaterial) == (
+            b.parentJoint,
+            b.parentFrame,
+            b.meshPath,
+            b.overrideMaterial,
+        ), a.name
+        assert a.placement.isApprox(b.placement, 1e-14), a.name
+        assert np.array_equal(a.meshScale, b.meshScale) and np.array_equal(a.meshColor, b.meshColor), a.name
+        if b.geometry.getObjectType() == coal.OT_BVH:  # a mesh: not read, an empty BVH (a viewer reads the file)
+            assert isinstance(a.geometry, coal.BVHModelBase) and a.geometry.num_vertices == 0, a.name
+        else:
+            assert a.geometry.getNodeType() == b.geometry.getNodeType(), a.name
+            assert a.geometry.saveToString() == b.geometry.saveToString(), a.name
+
+
+@pytest.mark.parametrize("name", sorted(ROBOTS))
+def test_visual_meshes_unread_are_pinocchios_objects_but_for_the_mesh_data(name: str) -> None:
+    """The preview takes the visual meshes' files, not their data: read by pinocchio as the
+    reference, every robot's visual objects are the same, the locked panda fingers reduced away."""
+    r = robot(name)
+    _same_visuals(r.geometry_model("visual"), r.geometry_model("visual", read_meshes=True))
+
+
+def test_visual_meshes_unread_of_a_user_urdf(tmp_path: Path) -> None:
+    """Two visuals on a link, a scaled mesh under a named material, a primitive with its own colour
+    and a mesh on a fixed child link: as pinocchio reads them."""
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "tri.obj").write_text("v 0 0 0\nv 0.01 0 0\nv 0 0.01 0\nf 1 2 3\n")
+    mesh = '<mesh filename="{}" scale="2 3 4"/>'
+    (tmp_path / "arm.urdf").write_text(
+        '<robot name="arm"><material name="red"><color rgba="1 0 0 1"/></material>'
+        '<link name="base"/><link name="upper">'
+        '<visual><origin xyz="0 0 0.1" rpy="0.1 0.2 0.3"/><geometry>'
+        + mesh.format("meshes/tri.obj")
+        + '</geometry><material name="red"/></visual>'
+        '<visual><geometry><box size="0.1 0.2 0.3"/></geometry>'
+        '<material name="blue"><color rgba="0 0 1 0.5"/></material></visual>'
+        '</link><link name="tool"><visual><geometry>'
+        + mesh.format(f"file://{tmp_path}/meshes/tri.obj")
+        + "</geometry></visual></link>"
+        '<joint name="j" type="revolute"><parent link="base"/><child link="upper"/><axis xyz="0 0 1"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        '<joint name="f" type="fixed"><parent link="upper"/><child link="tool"/>'
+        '<origin xyz="0.2 0 0"/></joint></robot>'
+    )
+    full = pin.buildModelFromUrdf(str(tmp_path / "arm.urdf"))
+    read = pin.buildGeomFromUrdf(full, str(tmp_path / "arm.urdf"), pin.GeometryType.VISUAL, package_dirs=[str(tmp_path)])
+    unread = _unread_visual_meshes(full, tmp_path / "arm.urdf")
+    assert [g.name for g in read.geometryObjects] == ["upper_0", "upper_1", "tool_0"]
+    _same_visuals(unread, read)
+    assert unread.geometryObjects[0].meshScale.tolist() == [2.0, 3.0, 4.0]
 
 
 def test_example_robot_data_urdf_as_a_user_urdf_resolves_four_folders_up() -> None:

@@ -392,18 +392,28 @@ class Robot:
         return self._symbolic
 
     # ---------------------------------------------------------------- geometry
-    def geometry_model(self, kind: Literal["collision", "visual"] = "collision") -> pin.GeometryModel:
+    def geometry_model(
+        self, kind: Literal["collision", "visual"] = "collision", *, read_meshes: bool = False
+    ) -> pin.GeometryModel:
         """Collision or visual geometry of the robot, consistent with :attr:`model`: locked joints
-        reduced away, base placement applied. Meshes are read from the URDF's packages; visual
-        meshes get axis-aligned bounding-box trees (they are drawn, never collided: the Panda's
-        build in 0.2 s instead of 0.5 s with the default OBBRSS trees)."""
+        reduced away, base placement applied.
+
+        Collision meshes are read from the URDF's packages (distances are taken on them). Visual
+        meshes are only drawn, by the preview, which reads each file itself
+        (:mod:`optlight.viz.meshes`): by default they are not read (:func:`_unread_visual_meshes`;
+        the Panda's COLLADA files took 0.18 s to read into coal, for nothing). ``read_meshes=True``
+        reads them too, into axis-aligned bounding-box trees (0.2 s instead of 0.5 s with the
+        default OBBRSS trees), as the check of a user URDF does."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
         dirs = [str(p) for p in self.package_dirs]
         loader = coal.MeshLoader(coal.BV_AABB) if kind == "visual" else None
         with quiet_stderr() as said:
             try:
                 full = pin.buildModelFromUrdf(str(self.urdf_path))
-                geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs, mesh_loader=loader)
+                if kind == "collision" or read_meshes:
+                    geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs, mesh_loader=loader)
+                else:
+                    geom = _unread_visual_meshes(full, self.urdf_path)
             except (RuntimeError, ValueError) as e:
                 detail = _first_error(said, e)
                 raise RobotError(
@@ -419,6 +429,37 @@ class Robot:
             if obj.parentJoint == 0:
                 obj.placement = self.base_placement * obj.placement
         return geom
+
+
+def _unread_visual_meshes(model: pin.Model, urdf: Path) -> pin.GeometryModel:
+    """The visual geometry of ``urdf`` as pinocchio's parser makes it (names ``<link>_<k>``, parent
+    joints and frames, placements, materials, primitives), its mesh files found but not read: the
+    parser is given the URDF with each visual ``<mesh>`` replaced by a point (a sphere of radius 0),
+    and each of those objects then gets back the mesh's file (``meshPath``, resolved as
+    :func:`resolve_mesh` does), its ``scale`` (``meshScale``) and an empty BVH as geometry, which
+    meshcat viewers take for a mesh to read from its file. Raises ValueError for a mesh file that
+    does not resolve."""
+    root = ET.parse(urdf).getroot()
+    meshes: dict[str, tuple[Path, Array]] = {}
+    for link in root.findall("link"):
+        for k, visual in enumerate(link.findall("visual")):
+            geometry = visual.find("geometry")
+            mesh = geometry.find("mesh") if geometry is not None else None
+            if geometry is None or mesh is None:
+                continue
+            filename = mesh.get("filename", "")
+            found = resolve_mesh(filename, urdf)
+            if found is None:
+                raise ValueError(f"the mesh {filename!r} does not resolve")
+            meshes[f"{link.get('name')}_{k}"] = (found, np.array(mesh.get("scale", "1 1 1").split(), float))
+            geometry.remove(mesh)
+            ET.SubElement(geometry, "sphere", radius="0")
+    geom = pin.buildGeomFromUrdfString(model, ET.tostring(root, encoding="unicode"), pin.GeometryType.VISUAL)
+    for obj in geom.geometryObjects:
+        if obj.name in meshes:
+            path, scale = meshes[obj.name]
+            obj.geometry, obj.meshPath, obj.meshScale = coal.BVHModelOBBRSS(), str(path), scale
+    return geom
 
 
 def _wrap_into_limits(theta: Array, lower: Array, upper: Array) -> Array:
