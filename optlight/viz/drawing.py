@@ -34,6 +34,13 @@ if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
     from matplotlib.figure import Figure
 
 
+#: zlib level of the figures' PNGs (Pillow's default is 6). PNG is lossless: the pixels are the same
+#: at every level. At 3 the default plan's six figures are saved in ~1.0 s instead of ~1.15 s (the
+#: figure worker's drawing is what the command waits for at its end), at about the same size (the
+#: trajectory figure 420 → 525 kB, the path figure 237 → 212 kB, the others within 10 %).
+PNG_COMPRESS_LEVEL = 3
+
+
 @dataclass(frozen=True)
 class FigureJob:
     """A figure to draw: ``build(*args)`` returns it, saved as a PNG at ``dpi``. ``build`` is a
@@ -51,7 +58,9 @@ class FigureJob:
     def png(self) -> bytes:
         """The figure drawn (Agg) as PNG bytes, laid out as built (no tight bounding box)."""
         buffer = io.BytesIO()
-        self.build(*self.args).savefig(buffer, format="png", dpi=self.dpi)
+        self.build(*self.args).savefig(
+            buffer, format="png", dpi=self.dpi, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL}
+        )
         return buffer.getvalue()
 
     def save(self, path: str | Path) -> Path:
