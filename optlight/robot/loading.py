@@ -406,11 +406,13 @@ class Robot:
         default OBBRSS trees), as the check of a user URDF does."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
         dirs = [str(p) for p in self.package_dirs]
-        loader = coal.MeshLoader(coal.BV_AABB) if kind == "visual" else None
         with quiet_stderr() as said:
             try:
                 full = pin.buildModelFromUrdf(str(self.urdf_path))
-                if kind == "collision" or read_meshes:
+                if kind == "collision":
+                    geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs)
+                elif read_meshes:
+                    loader = coal.MeshLoader(coal.BV_AABB)
                     geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs, mesh_loader=loader)
                 else:
                     geom = _unread_visual_meshes(full, self.urdf_path)
