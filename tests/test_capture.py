@@ -52,27 +52,55 @@ def captures_of(camera, scene: Scene, lights=LIGHTS_DEG):
     ]
 
 
+#: Sub-pixels per side of the model's image averaged over each pixel's footprint, as Mitsuba's box filter does.
+FOOTPRINT = 4
+
+
+def footprint_image(problem, light) -> tuple[np.ndarray, np.ndarray]:
+    """The model camera's image averaged over each pixel's footprint (:data:`FOOTPRINT`² sub-pixel
+    centres of the same pinhole camera), and where a pixel holds a saturated sub-pixel (there the
+    camera clips the sum of the footprint's radiance, not each sub-pixel's)."""
+    cam, s = Scene.from_problem(problem).camera, FOOTPRINT
+    data = problem.to_dict()
+    data["camera"].update(
+        width=s * cam.width,
+        height=s * cam.height,
+        fx_px=s * cam.fx,
+        fy_px=s * cam.fy,
+        cx_px=s * (cam.cx + 0.5) - 0.5,
+        cy_px=s * (cam.cy + 0.5) - 0.5,
+    )
+    fine = problem_from_dict(data)
+    blocks = ModelCamera(Scene.from_problem(fine), fine.world).capture(light).image.reshape(cam.height, s, cam.width, s)
+    return blocks.mean(axis=(1, 3)), blocks.max(axis=(1, 3)) >= 1.0
+
+
 @pytest.mark.parametrize("model", ["point", "directional"])
 def test_mitsuba_lambertian_sphere_agrees_with_the_renderer_within_its_noise(model: str) -> None:
     """[world] equal to the model: 256 spp, pixels ≥ 3 px inside the silhouette and away from the
-    terminator (|n·l| > 0.15), an off-centre principal point. σ is the Monte Carlo noise measured from
-    two independent renders; every pixel agrees within 6σ and the mean within 0.5 %."""
+    terminator (|n·l| > 0.15), an off-centre principal point. Mitsuba's box filter integrates each
+    pixel's footprint, so the renderer's image is averaged over it too (at the pixel centre alone, the
+    means differed by 0.05 % and the scalar variant's worst pixel by 6.6σ). σ is the Monte Carlo noise
+    measured from two independent renders; every pixel agrees within 6σ plus 0.2 % of its value and the
+    mean within 0.1 %. The 0.2 %: single pixels differ by up to 0.1 % after 16 renders (not a
+    sub-pixel shift of the image, fitted below 0.001 px, nor a scale: the means agree to 0.03 %);
+    over 10 seeds of both variants the worst pixel used 89 % of this tolerance."""
     problem = sphere_problem(model)
     scene = Scene.from_problem(problem)
     light = scene.sphere.position(0.6, 1.2)
     camera = MitsubaCamera(scene, problem.world)
     first, second = camera.capture(light).image, camera.capture(light).image
-    ours = ModelCamera(scene, problem.world).capture(light).image
+    ours, saturated = footprint_image(problem, light)
     gb = scene.gbuffer
     cos, _ = cosine_and_falloff(gb.points, gb.normals, light, model, scene.sphere.center, scene.sphere.radius)
     smooth = scene.to_image(np.abs(cos) > 0.15) > 0
-    inside = binary_erosion(gb.mask, iterations=3) & smooth
+    inside = binary_erosion(gb.mask, iterations=3) & smooth & ~saturated
     sigma = float(np.std((first - second)[inside]) / np.sqrt(2))
     diff = (first - ours)[inside]
     assert inside.sum() > 300
     assert 0 < sigma < 0.01
-    assert np.abs(diff).max() < 6 * sigma
-    assert abs(diff.mean()) < 0.005 * ours[inside].mean()
+    assert np.all(np.abs(diff) < 6 * sigma + 0.002 * ours[inside])
+    assert abs(diff.mean()) < 0.001 * ours[inside].mean()
     # the silhouette: the same object pixels (ambient lights the whole sphere), to the boundary ring
     lit = first > 0.5 * 0.6 * 0.05
     assert np.mean(lit != gb.mask) < 0.02
