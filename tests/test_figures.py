@@ -96,3 +96,27 @@ def test_trajectory_figure_shades_every_dwell_full_height(tmp_path):
             x = round(ax.transData.transform((a + 0.2 * (b - a), 0.0))[0])
             grey = np.abs(png[np.round(rows).astype(int), x] - 0.85 * 255) < 8
             assert grey[:3].any() and grey[-3:].any() and grey.mean() > 0.85
+
+
+def test_trajectory_figure_spans_the_motion_with_time_ticks_on_its_bottom_row():
+    """Every axes spans the trajectory's time exactly; only the bottom row carries time ticks (and
+    the label), the rows above none."""
+    robot = load_robot("panda")
+    knots = robot.theta_ref + np.linspace(0.0, 1.0, 3)[:, None] * 0.3
+    trajectory = time_parameterize([knots[:2], knots[1:]], robot.velocity_limit, robot.acceleration_limit, dwell_s=0.2)
+    fig = trajectory_figure(
+        trajectory,
+        lower=robot.lower,
+        upper=robot.upper,
+        velocity_limit=robot.velocity_limit,
+        acceleration_limit=robot.acceleration_limit,
+    )
+    fig.canvas.draw()
+    axes = np.array(fig.axes).reshape(trajectory.dof, 3)
+    times = trajectory.sample_times(200.0)
+    for ax in axes.ravel():
+        assert ax.get_xlim() == (times[0], times[-1])
+    for ax in axes[-1]:
+        assert ax.get_xlabel() == "t [s]" and len(ax.get_xticks()) >= 3
+    for ax in axes[:-1].ravel():
+        assert len(ax.get_xticks()) == 0

@@ -37,9 +37,12 @@ def trajectory_figure(
     Fixed margins (in inches) rather than a layout engine, and the dwells and captures of each axes
     as one collection each rather than an artist per dwell: for 7 joints and 36 dwells the figure
     took 3 s to build and save, most of it constrained layout measuring 21 axes and 1,500 artists;
-    now 0.8 s."""
+    now 0.8 s. Every axes spans exactly the trajectory's time and only the bottom row has time
+    ticks: matplotlib makes a tick object for every tick of every axes, drawn or not, and the rows
+    above held a third of the figure's 331 (0.60 → 0.49 s to draw the default plan's)."""
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullLocator
 
     n = trajectory.dof
     lo, hi = (np.broadcast_to(np.asarray(x, float), (n,)) for x in (lower, upper))
@@ -54,7 +57,7 @@ def trajectory_figure(
     fig = Figure(figsize=(width, height))
     # margins (in): the joint names and tick labels on the left, the titles on top, t below
     set_margins(fig, left=0.85, right=0.15, top=0.75, bottom=0.5, rows=n, columns=3, gap_x=0.55, gap_y=0.2)
-    axes = fig.subplots(n, 3, sharex=True, squeeze=False)
+    axes = fig.subplots(n, 3, squeeze=False)
     dwells = [[(a, 0.0), (b, 0.0), (b, 1.0), (a, 1.0)] for a, b in trajectory.landmark_intervals]
     captures = [[(tc, 0.0), (tc, 1.0)] for tc in trajectory.capture_times]
     for j in range(n):
@@ -74,8 +77,11 @@ def trajectory_figure(
                 ax.set_title(titles[c])
             if c == 0:
                 ax.set_ylabel(names[j])
+            ax.set_xlim(t[0], t[-1])
             if j == n - 1:
                 ax.set_xlabel("t [s]")
+            else:
+                ax.xaxis.set_major_locator(NullLocator())
     fig.suptitle(
         f"Timed trajectory: {trajectory.duration:.2f} s, {trajectory.capture_times.size} captures "
         "(grey: dwells, red: limits)",
