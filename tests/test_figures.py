@@ -72,17 +72,22 @@ class _Sized(list):
         """No kept visibility: the contact sheet casts its own shadow rays."""
 
 
-def test_trajectory_figure_shades_every_dwell_full_height(tmp_path):
-    robot = load_robot("panda")
-    knots = robot.theta_ref + np.linspace(0.0, 1.0, 4)[:, None] * np.array([0.4, 0.2, 0, -0.2, 0, 0.2, 0.4])
-    trajectory = time_parameterize([knots[:2], knots[1:3], knots[2:]], robot.velocity_limit, robot.acceleration_limit, dwell_s=0.3)
-    fig = trajectory_figure(
+def robot_trajectory_figure(trajectory, robot):
+    """The trajectory figure against ``robot``'s own limits."""
+    return trajectory_figure(
         trajectory,
         lower=robot.lower,
         upper=robot.upper,
         velocity_limit=robot.velocity_limit,
         acceleration_limit=robot.acceleration_limit,
     )
+
+
+def test_trajectory_figure_shades_every_dwell_full_height(tmp_path):
+    robot = load_robot("panda")
+    knots = robot.theta_ref + np.linspace(0.0, 1.0, 4)[:, None] * np.array([0.4, 0.2, 0, -0.2, 0, 0.2, 0.4])
+    trajectory = time_parameterize([knots[:2], knots[1:3], knots[2:]], robot.velocity_limit, robot.acceleration_limit, dwell_s=0.3)
+    fig = robot_trajectory_figure(trajectory, robot)
     fig.savefig(tmp_path / "trajectory.png", dpi=fig.dpi)  # the pixels the transforms below give
     png = np.asarray(Image.open(tmp_path / "trajectory.png").convert("L"), float)
     height = png.shape[0]
@@ -104,13 +109,7 @@ def test_trajectory_figure_spans_the_motion_with_time_ticks_on_its_bottom_row():
     robot = load_robot("panda")
     knots = robot.theta_ref + np.linspace(0.0, 1.0, 3)[:, None] * 0.3
     trajectory = time_parameterize([knots[:2], knots[1:]], robot.velocity_limit, robot.acceleration_limit, dwell_s=0.2)
-    fig = trajectory_figure(
-        trajectory,
-        lower=robot.lower,
-        upper=robot.upper,
-        velocity_limit=robot.velocity_limit,
-        acceleration_limit=robot.acceleration_limit,
-    )
+    fig = robot_trajectory_figure(trajectory, robot)
     fig.canvas.draw()
     axes = np.array(fig.axes).reshape(trajectory.dof, 3)
     times = trajectory.sample_times(200.0)
