@@ -58,8 +58,8 @@ FOOTPRINT = 4
 
 def footprint_image(problem, light) -> tuple[np.ndarray, np.ndarray]:
     """The model camera's image averaged over each pixel's footprint (:data:`FOOTPRINT`² sub-pixel
-    centres of the same pinhole camera), and where a pixel holds a saturated sub-pixel (there the
-    camera clips the sum of the footprint's radiance, not each sub-pixel's)."""
+    centres of the same pinhole camera), and where a pixel holds a saturated sub-pixel (there
+    Mitsuba's camera clips the footprint's mean radiance, not each sub-pixel's)."""
     cam, s = Scene.from_problem(problem).camera, FOOTPRINT
     data = problem.to_dict()
     data["camera"].update(
