@@ -5,6 +5,7 @@ process left behind."""
 from __future__ import annotations
 
 import json
+import logging
 import os
 import urllib.error
 import urllib.request
@@ -305,6 +306,19 @@ def test_the_local_cluster_listens_on_loopback_without_dashboard(monkeypatch: py
             urllib.request.urlopen(f"{http}/status", timeout=10)
         assert missing.value.code == 404
     assert "OMP_NUM_THREADS" not in os.environ and os.environ["MKL_NUM_THREADS"] == "3"
+
+
+def _log_in_worker(level: int, text: str) -> None:
+    logging.getLogger("distributed.worker").log(level, text)
+
+
+def test_a_local_clusters_error_logs_do_not_reach_the_terminal(capfd: pytest.CaptureFixture[str]) -> None:
+    """An ERROR a local cluster's worker logs (as Dask does when a heartbeat meets the scheduler
+    already closed, with its traceback, at the end of a batch) is not printed on the terminal the
+    workers share with this process: a row's failure is reported in the results, not in Dask's log."""
+    with dask_client(workers=1) as client:
+        client.run(_log_in_worker, logging.ERROR, "a worker's error at shutdown")
+    assert "a worker's error at shutdown" not in capfd.readouterr().err
 
 
 def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Path) -> None:
