@@ -389,9 +389,18 @@ class CellResult:
         return lines
 
 
+#: Decimals the searched values are rounded to (m, and degrees for yaw): far below any placement's
+#: precision, far above the residues of floating-point steps (see :func:`axis_values`).
+GRID_DECIMALS = 12
+
+
 def axis_values(lo: float, hi: float, steps: int) -> Array:
-    """``steps`` evenly spaced values on [lo, hi], or the one value when lo = hi."""
-    return np.array([lo]) if lo == hi else np.linspace(lo, hi, steps)
+    """``steps`` evenly spaced values on [lo, hi], or the one value when lo = hi, rounded to
+    :data:`GRID_DECIMALS` decimals: lo + i·step leaves residues of ~1e-17, and a finer level's window
+    around 0.075 m of the example cell began at −1.4e-17 m instead of 0 (and had 0.11249999999999996
+    for 0.1125), which the command printed and ``best_problem.toml`` kept."""
+    values = np.array([lo]) if lo == hi else np.linspace(lo, hi, steps)
+    return np.round(values, GRID_DECIMALS) + 0.0  # + 0.0: a rounded −0.0 becomes 0.0
 
 
 def level_grid(spec: CellSpec, level: int, center: Mapping[str, float] | None) -> list[dict[str, float]]:

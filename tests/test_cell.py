@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from optlight.cell import (
     evaluate_placement,
     level_grid,
     load_cell_spec,
+    placement_problem,
     problem_toml,
 )
 from optlight.cli import main
@@ -108,6 +110,25 @@ def test_level_grid_zooms_around_the_best_within_the_ranges(tmp_path: Path) -> N
     third = level_grid(spec, 2, {"base_x_m": 0.0, "base_y_m": 0.2, "base_z_m": 0.1})
     assert sorted({p["base_x_m"] for p in third}) == pytest.approx([-0.05, -0.025, 0.0, 0.025, 0.05])
     assert sorted({p["base_y_m"] for p in third}) == pytest.approx([0.15, 0.175, 0.2, 0.225, 0.25])
+
+
+def test_level_grid_values_are_the_decimals_of_the_ranges(tmp_path: Path) -> None:
+    """The example cell's ranges (±0.15 m, 5 steps): the window around the level-0 point 0.075 m
+    holds 0 and 0.1125 exactly, not −1.4e-17 and 0.11249999999999996 (floating-point steps), so
+    ``best_problem.toml`` and the command's report print the placement as it was searched."""
+    write_base(tmp_path)
+    ranges = {"base_x_m": [-0.15, 0.15], "base_y_m": [-0.15, 0.15]}
+    spec = cell_spec_from_dict(
+        {"problem": "small.toml", "method": "coarse_to_fine", "steps": 5, "search": ranges},
+        source=tmp_path / "c.toml",
+    )
+    best = next(p for p in level_grid(spec, 0, None) if p["base_x_m"] > 0.07 and p["base_y_m"] > 0.07)
+    second = level_grid(spec, 1, best)
+    for axis in ranges:
+        values = sorted({p[axis] for p in second})
+        assert values == [0.0, 0.0375, 0.075, 0.1125, 0.15]
+        assert not math.copysign(1.0, values[0]) < 0  # 0.0, not −0.0
+    assert "-1.38" not in problem_toml(placement_problem(spec, second[0]))
 
 
 @pytest.mark.parametrize(
