@@ -90,7 +90,7 @@ def solve(
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
     end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the figures of the
     results folder are drawn there while the rest is solved (:attr:`Plan.figures`): the landmark
-    figures once the landmarks are found, the motion's once it is timed.
+    figures once the captures are placed, the motion's once it is timed.
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
@@ -118,15 +118,16 @@ def solve(
             setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
         )
         timings["landmarks"] = time.perf_counter() - start
-        figures: dict[str, Future[bytes]] = {}
-        if worker is not None:  # drawn there while the motion is planned
-            figures = {n: worker.draw(job) for n, job in landmark_jobs(landmarks, setup.scene).items()}
 
         with stage("placement"):  # what is left of it once the search is done
             if design is None:
                 placement = ahead.placement(captures)
             else:
                 placement = place_captures(setup, captures, design, reacher)
+    figures: dict[str, Future[bytes]] = {}
+    if worker is not None:  # drawn there while the motion is planned, with the captures placed
+        jobs = landmark_jobs(landmarks, setup.scene, placement.landmarks)
+        figures = {n: worker.draw(job) for n, job in jobs.items()}
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):

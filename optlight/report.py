@@ -227,10 +227,11 @@ def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def landmark_jobs(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
-    """The landmark figures of a results folder (:func:`~optlight.viz.figures.landmark_figures`);
-    none for a light set, which has no sweep or reference."""
-    return landmark_figures(landmarks, scene) if _landmark_figure_names(landmarks) else {}
+def landmark_jobs(landmarks: LandmarkSet, scene: Scene, captures: Sequence[Landmark]) -> dict[str, FigureJob]:
+    """The landmark figures of a results folder (:func:`~optlight.viz.figures.landmark_figures`),
+    with the plan's ``captures`` that the placement moved drawn where they are captured; none for a
+    light set, which has no sweep or reference."""
+    return landmark_figures(landmarks, scene, captures) if _landmark_figure_names(landmarks) else {}
 
 
 def _landmark_figure_names(landmarks: LandmarkSet) -> tuple[str, ...]:
@@ -307,7 +308,7 @@ def save_results(
     missing = not drawn.keys() >= set(_landmark_figure_names(landmarks))
     figures = {
         **motion_jobs(setup, visited, nlp.theta, trajectory),
-        **(landmark_jobs(landmarks, setup.scene) if missing else {}),
+        **(landmark_jobs(landmarks, setup.scene, visited) if missing else {}),
         **(extra_figures or {}),
     }
     sources: dict[str, Callable[[], bytes]] = {name: png.result for name, png in drawn.items()}

@@ -3,6 +3,7 @@ landmarks, never worse than the sweep, NLP built once, free mode keeps its separ
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.spec import Problem
-from optlight.viz.figures import contact_sheet_images, save_landmark_figures
+from optlight.viz.figures import contact_sheet_images, landmark_figures, save_landmark_figures
 
 REF_ZENITH_DEG = 31.3  # off the sweep grid, so only the refinement can land on it; out of the camera's view
 
@@ -231,3 +232,36 @@ def test_landmark_figures(result: lm_module.LandmarkSet, scene: Scene, tmp_path:
     ]
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_landmark_figures_draw_a_moved_capture_where_it_is_captured(
+    result: lm_module.LandmarkSet, scene: Scene
+) -> None:
+    """A capture the placement moved 12° down its azimuth: the polar plot and the cost map draw it
+    there, joined to its landmark; the contact sheet shows the camera image there (its shadow rays
+    cast afresh), labelled with both zeniths; the other captures keep their landmarks' images."""
+    landmark = result.landmarks[1]
+    zenith = landmark.zenith + math.radians(12.0)
+    moved = dataclasses.replace(
+        landmark, zenith=zenith, position=scene.sphere.position(zenith, landmark.azimuth), status="placed"
+    )
+    captures = [moved if c is landmark else c for c in result.landmarks]
+    jobs = landmark_figures(result, scene, captures)
+    for stem in ("landmarks_polar", "landmarks_cost"):
+        axes = jobs[stem].build(*jobs[stem].args).axes[0]
+        marker = [line for line in axes.lines if line.get_marker() == "D"]
+        assert len(marker) == 1, stem
+        np.testing.assert_allclose(np.ravel(marker[0].get_xydata()), [moved.azimuth, math.degrees(zenith)])
+        joined = [line for line in axes.lines if line.get_marker() in ("None", None) and len(line.get_xdata()) == 2]
+        assert any(
+            np.allclose(line.get_ydata(), np.degrees([landmark.zenith, zenith])) for line in joined
+        ), stem
+    sheet = jobs["landmarks_images"]
+    images = sheet.args[1]
+    np.testing.assert_allclose(images[1], scene.render(moved.position), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(images[0], scene.render(result.landmarks[0].position), rtol=1e-6, atol=1e-7)
+    assert not np.allclose(images[1], scene.render(landmark.position), atol=1e-3)  # the move shows
+    labels = [text.get_text() for text in sheet.build(*sheet.args).axes[0].texts]
+    azimuth, before, after = (math.degrees(a) for a in (landmark.azimuth, landmark.zenith, zenith))
+    assert labels[1] == f"#{landmark.index} θ {before:.1f}→{after:.1f}° φ {azimuth:.0f}°"
+    assert "→" not in labels[0]

@@ -3,7 +3,10 @@
 Landmark figures: :func:`landmarks_polar_figure` (the paper's Fig. 1), :func:`histograms_figure`,
 :func:`contact_sheet_figure`, :func:`cost_map_figure`; :func:`landmark_figures` gives all four as
 :class:`~optlight.viz.drawing.FigureJob` s (drawn here or in a worker process), and
-:func:`save_landmark_figures` writes them.
+:func:`save_landmark_figures` writes them. A plan's captures are its landmarks but for those the
+placement moved (status "placed": the robot cannot hold the light clear at the landmark): the polar
+plots draw those where they are captured, joined to their landmark, and the contact sheet shows
+their camera image there.
 Figures are drawn on :class:`matplotlib.figure.Figure` objects, never through pyplot, so nothing
 depends on a display or on global backend state. Angles are shown in degrees.
 """
@@ -18,7 +21,7 @@ from typing import TYPE_CHECKING, cast
 import numpy as np
 from matplotlib.colors import LogNorm
 
-from optlight.planning.landmarks import LandmarkSet
+from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.scene import Scene
 from optlight.viz.drawing import FigureJob
 from optlight.viz.layout import set_margins
@@ -33,6 +36,10 @@ COST_FLOOR = 1e-12
 #: cell's bottom edge, centred across, its label above.
 CONTACT_SHEET_CELL_IN = (1.4, 1.55)
 CONTACT_SHEET_TILE_IN = 1.3
+#: Contact sheet: cells per row.
+CONTACT_SHEET_COLUMNS = 6
+#: The colour of the captures the placement moved, in the polar plot and the contact sheet.
+MOVED_COLOR = "tab:purple"
 #: Resolution (dots per inch) of the landmark figures' PNGs.
 LANDMARK_FIGURE_DPI = 110
 
@@ -57,17 +64,49 @@ def _azimuth_edges(azimuth: np.ndarray) -> np.ndarray:
     return np.r_[azimuth - step / 2, azimuth[-1] + step / 2]
 
 
-def radial_limit(landmarks: LandmarkSet, zenith_max: float, fixed_zenith: float | None = None) -> float:
-    """A radial limit (rad) for polar plots: 1.4 × the largest landmark (or fixed) zenith, rounded up
-    to 5°, at most ``zenith_max``."""
-    largest = max([float(landmarks.zeniths.max(initial=0.0))] + ([fixed_zenith] if fixed_zenith else []))
+def radial_limit(
+    landmarks: LandmarkSet, zenith_max: float, fixed_zenith: float | None = None, moved: Sequence[Landmark] = ()
+) -> float:
+    """A radial limit (rad) for polar plots: 1.4 × the largest landmark, moved capture's (or fixed)
+    zenith, rounded up to 5°, at most ``zenith_max``."""
+    zeniths = [float(landmarks.zeniths.max(initial=0.0)), *(c.zenith for c in moved)]
+    largest = max(zeniths + ([fixed_zenith] if fixed_zenith else []))
     return min(zenith_max, math.radians(5 * math.ceil(max(math.degrees(1.4 * largest), 1e-9) / 5)))
 
 
-def landmarks_polar_figure(landmarks: LandmarkSet, r_max: float, fixed_zenith: float | None = None) -> Figure:
+def moved_captures(captures: Sequence[Landmark]) -> list[Landmark]:
+    """The captures the placement moved off their landmark (status "placed"), by landmark index."""
+    return sorted((c for c in captures if c.status == "placed"), key=lambda c: c.index)
+
+
+def _draw_moved(ax: PolarAxes, landmarks: LandmarkSet, moved: Sequence[Landmark], color: str) -> None:
+    """Each moved capture where it is captured (a filled diamond), joined to its landmark."""
+    origin = {lm.index: lm for lm in landmarks.landmarks}
+    for k, capture in enumerate(moved):
+        landmark = origin[capture.index]
+        ax.plot(
+            [landmark.azimuth, capture.azimuth],
+            np.degrees([landmark.zenith, capture.zenith]),
+            color=color,
+            lw=0.8,
+        )
+        ax.plot(
+            capture.azimuth,
+            math.degrees(capture.zenith),
+            "D",
+            color=color,
+            ms=5,
+            label="captured elsewhere (moved by the placement)" if k == 0 else None,
+        )
+
+
+def landmarks_polar_figure(
+    landmarks: LandmarkSet, r_max: float, fixed_zenith: float | None = None, moved: Sequence[Landmark] = ()
+) -> Figure:
     """The landmarks projected on the plane (the paper's Fig. 1): radius = zenith (deg), angle =
     azimuth; circles for the landmarks, stars for the fixed-zenith circle at the same azimuths
-    (``fixed_zenith``, rad; the paper's 10° trajectory). ``r_max`` (rad) is the radial limit."""
+    (``fixed_zenith``, rad; the paper's 10° trajectory), diamonds for the ``moved`` captures
+    (:func:`moved_captures`) where they are captured. ``r_max`` (rad) is the radial limit."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(5.2, 5.2))
@@ -89,6 +128,7 @@ def landmarks_polar_figure(landmarks: LandmarkSet, r_max: float, fixed_zenith: f
     if landmarks.mode == "azimuth":
         ax.plot(np.r_[az[order], az[order][:1]], np.r_[zen[order], zen[order][:1]], color="tab:blue", lw=0.8)
     ax.plot(az, zen, "o", mfc="none", color="tab:blue", ms=7, label="landmarks")
+    _draw_moved(ax, landmarks, moved, MOVED_COLOR)
     ax.set_title(f"Landmarks ({len(landmarks)}, {landmarks.mode} mode): radius = zenith (deg)", fontsize=10)
     ax.legend(loc="lower left", bbox_to_anchor=(-0.1, -0.12), fontsize=8, frameon=False)
     return fig
@@ -141,23 +181,36 @@ def histograms_figure(landmarks: LandmarkSet, indices: Sequence[int] | None = No
     return fig
 
 
-def contact_sheet_images(landmarks: LandmarkSet, scene: Scene) -> np.ndarray:
-    """The camera image (NumPy renderer, shadow rays) at every landmark, (M, H, W) float32: with the
-    visibility the landmark search kept (:meth:`~optlight.planning.landmarks.LandmarkSet.visibility`),
-    else every light's shadow rays in one ray-caster call."""
-    positions = np.array([lm.position for lm in landmarks.landmarks]).reshape(-1, 3)
+def contact_sheet_images(landmarks: LandmarkSet, scene: Scene, moved: Sequence[Landmark] = ()) -> np.ndarray:
+    """The camera image (NumPy renderer, shadow rays) at every landmark, or where it is captured when
+    the placement ``moved`` it (:func:`moved_captures`), (M, H, W) float32: with the visibility the
+    landmark search kept (:meth:`~optlight.planning.landmarks.LandmarkSet.visibility`), else every
+    light's shadow rays in one ray-caster call; a moved capture's cast afresh."""
+    captured = {c.index: c for c in moved}
+    lights = [captured.get(lm.index, lm) for lm in landmarks.landmarks]
+    positions = np.array([lm.position for lm in lights]).reshape(-1, 3)
     visibility = landmarks.visibility(scene.gbuffer.size)
     if visibility is None:
         visibility = scene.visibility(positions)
+    elif captured:
+        rows = [k for k, lm in enumerate(landmarks.landmarks) if lm.index in captured]
+        visibility = visibility.copy()
+        visibility[rows] = scene.visibility(positions[rows])
     images = [scene.to_image(scene.pixels(p, v)) for p, v in zip(positions, visibility, strict=True)]
     return np.array(images, np.float32).reshape(len(positions), scene.camera.height, scene.camera.width)
 
 
 def contact_sheet_figure(
-    landmarks: LandmarkSet, images: np.ndarray, saturation: float, columns: int = 6
+    landmarks: LandmarkSet,
+    images: np.ndarray,
+    saturation: float,
+    columns: int = CONTACT_SHEET_COLUMNS,
+    moved: Sequence[Landmark] = (),
 ) -> Figure:
     """The camera images at the landmarks (:func:`contact_sheet_images`; grey levels 0 to
-    ``saturation``) in a grid, each labelled with its index, zenith and azimuth.
+    ``saturation``) in a grid, each labelled with its index, zenith and azimuth; where the placement
+    ``moved`` the capture, the image is the capture's and the label (in :data:`MOVED_COLOR`) gives the
+    landmark's zenith, an arrow and the capture's.
 
     Drawn as images and labels on one axes spanning the figure, laid out in inches
     (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
@@ -173,14 +226,19 @@ def contact_sheet_figure(
     ax.set_xlim(0.0, cell_w * cols)
     ax.set_ylim(cell_h * rows, 0.0)  # inches from the top left corner
     ax.axis("off")
+    captured = {c.index: c for c in moved}
     for k, (lm, image) in enumerate(zip(landmarks.landmarks, images, strict=True)):
         x = cell_w * (k % cols) + 0.5 * (cell_w - tile)
         y = cell_h * (k // cols) + cell_h - tile - 0.05
         ax.imshow(image, cmap="gray", vmin=0.0, vmax=saturation, extent=(x, x + tile, y + tile, y))
+        zenith = f"{math.degrees(lm.zenith):.1f}°"
+        if lm.index in captured:  # from the landmark's zenith to the capture's, along its azimuth
+            zenith = f"{math.degrees(lm.zenith):.1f}→{math.degrees(captured[lm.index].zenith):.1f}°"
         ax.text(
             x + 0.5 * tile,
             y - 0.04,
-            f"#{lm.index} θ {math.degrees(lm.zenith):.1f}° φ {math.degrees(lm.azimuth):.0f}°",
+            f"#{lm.index} θ {zenith} φ {math.degrees(lm.azimuth):.0f}°",
+            color=MOVED_COLOR if lm.index in captured else "black",
             fontsize=7,
             ha="center",
             va="bottom",
@@ -188,10 +246,10 @@ def contact_sheet_figure(
     return fig
 
 
-def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
+def cost_map_figure(landmarks: LandmarkSet, r_max: float, moved: Sequence[Landmark] = ()) -> Figure:
     """The coarse sweep's cost over (zenith, azimuth) as a polar heat map (radius = zenith in deg up
     to ``r_max`` (rad), logarithmic colours over five decades below the largest cost), the landmarks
-    on top."""
+    on top and the ``moved`` captures (:func:`moved_captures`) where they are captured."""
     from matplotlib.figure import Figure
 
     grid = landmarks.sweep
@@ -209,11 +267,13 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
         cmap="viridis_r",
     )
     ax.plot(landmarks.azimuths, np.degrees(landmarks.zeniths), "o", mfc="none", color="tab:red", ms=6)
+    _draw_moved(ax, landmarks, moved, "tab:red")
     if landmarks.view_zenith > 0:
         circle = np.linspace(0, 2 * np.pi, 361)
         ax.plot(circle, np.full_like(circle, math.degrees(landmarks.view_zenith)), "--", color="white", lw=1.0)
     width, height = landmarks.resolution
-    ax.set_title(f"Sweep cost (search renders {width}×{height}), landmarks in red", fontsize=10)
+    moved_note = "\nfilled: captured elsewhere (moved by the placement)" if moved else ""
+    ax.set_title(f"Sweep cost (search renders {width}×{height}), landmarks in red{moved_note}", fontsize=10)
     fig.colorbar(mesh, ax=ax, pad=0.1, shrink=0.8, label="cost")
     return fig
 
@@ -222,28 +282,36 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float) -> Figure:
 LANDMARK_FIGURES = ("landmarks_polar", "landmarks_histograms", "landmarks_images", "landmarks_cost")
 
 
-def landmark_figures(landmarks: LandmarkSet, scene: Scene) -> dict[str, FigureJob]:
-    """The landmark figures by file stem (:data:`LANDMARK_FIGURES`). The fixed-zenith circle is the
-    reference light's zenith when the reference is a light; the polar plots zoom to
+def landmark_figures(
+    landmarks: LandmarkSet, scene: Scene, captures: Sequence[Landmark] = ()
+) -> dict[str, FigureJob]:
+    """The landmark figures by file stem (:data:`LANDMARK_FIGURES`), with the plan's ``captures``
+    the placement moved (:func:`moved_captures`; none when ``captures`` is empty). The fixed-zenith
+    circle is the reference light's zenith when the reference is a light; the polar plots zoom to
     :func:`radial_limit`. The contact sheet's images are rendered here, from the visibility the
     search kept, so that its job carries images (10 MB for the default's 36 landmarks) rather than
     the scene (26 MB, its ray caster built again and every shadow ray cast again where it is drawn)."""
+    moved = moved_captures(captures)
     ref = scene.problem.objective.reference
     fixed = math.radians(ref.zenith_deg) if ref.kind == "light" else None
-    r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed)
+    r_max = radial_limit(landmarks, scene.sphere.zenith_max, fixed, moved)
     dpi = LANDMARK_FIGURE_DPI
-    images = contact_sheet_images(landmarks, scene)
+    images = contact_sheet_images(landmarks, scene, moved)
+    saturation = scene.light.saturation
     jobs = (
-        FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed), dpi),
+        FigureJob(landmarks_polar_figure, (landmarks, r_max, fixed, moved), dpi),
         FigureJob(histograms_figure, (landmarks,), dpi),
-        FigureJob(contact_sheet_figure, (landmarks, images, scene.light.saturation), dpi),
-        FigureJob(cost_map_figure, (landmarks, r_max), dpi),
+        FigureJob(contact_sheet_figure, (landmarks, images, saturation, CONTACT_SHEET_COLUMNS, moved), dpi),
+        FigureJob(cost_map_figure, (landmarks, r_max, moved), dpi),
     )
     return dict(zip(LANDMARK_FIGURES, jobs, strict=True))
 
 
-def save_landmark_figures(landmarks: LandmarkSet, scene: Scene, folder: str | Path) -> list[Path]:
+def save_landmark_figures(
+    landmarks: LandmarkSet, scene: Scene, folder: str | Path, captures: Sequence[Landmark] = ()
+) -> list[Path]:
     """All :func:`landmark_figures` written into ``folder`` as ``<name>.png``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    return [job.save(folder / f"{name}.png") for name, job in landmark_figures(landmarks, scene).items()]
+    jobs = landmark_figures(landmarks, scene, captures)
+    return [job.save(folder / f"{name}.png") for name, job in jobs.items()]
