@@ -125,7 +125,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
             console=console,
             transient=False,
         ) as bars:
-            tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES}
+            # the scene was built above, in the checks: the solve has no "scene" stage to show
+            tasks = {name: bars.add_task(name, total=1, start=False) for name in STAGES if name != "scene"}
 
             def progress(stage: str, done: int, total: int) -> None:
                 interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"

@@ -3,7 +3,8 @@
 A straight line of stages, each taking built objects and returning a typed result (each timed in
 ``Plan.timings``):
 
-1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once;
+1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
+   (no stage of the solve when the caller passes it built, as the command line does in its checks);
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
    on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
    designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-
@@ -108,8 +109,11 @@ def solve(
         timings[name] = time.perf_counter() - start
         notify(name, 1, 1)
 
-    with stage("scene"):
-        setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
+    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): no stage here
+        setup = problem
+    else:
+        with stage("scene"):
+            setup = Setup.from_problem(problem)
 
     start = time.perf_counter()
     reacher = Reacher(setup)

@@ -542,6 +542,10 @@ def test_solve_writes_every_figure_and_stops_its_figure_worker(tmp_path: Path, m
         with Image.open(tmp_path / "out" / name) as image:
             assert min(image.size) > 100 and len(image.getcolors(1 << 16) or range(257)) > 16  # drawn, not blank
     assert all(f"![{stem}]({stem}.png)" in (tmp_path / "out" / "report.md").read_text() for stem in stems)
+    # the scene was built in the command's checks, not in the solve: no "scene" stage of 0 s is reported
+    timings = json.loads((tmp_path / "out" / "plan.json").read_text())["summary"]["timings_s"]
+    assert list(timings) == ["landmarks", "placement", "path", "nlp", "timing", "verify", "total"]
+    assert "| scene |" not in (tmp_path / "out" / "report.md").read_text()
 
 
 # --------------------------------------------------------------------------------------------
