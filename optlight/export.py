@@ -92,6 +92,9 @@ def lp_text(filenames: Sequence[str], directions_lp: ArrayLike) -> str:
     d = np.asarray(directions_lp, float).reshape(-1, 3)
     if len(filenames) != len(d):
         raise ValueError(f"{len(filenames)} file names for {len(d)} light directions")
+    # a component that rounds to zero is written 0.000000000: a residue of −8e-17 (the default plan's
+    # first light, straight to the right) printed as −0.000000000
+    d = np.where(np.abs(d) < 5e-10, 0.0, d)
     lines = [str(len(d))]
     lines.extend(f"{name} {x:.9f} {y:.9f} {z:.9f}" for name, (x, y, z) in zip(filenames, d, strict=True))
     return "\n".join(lines) + "\n"

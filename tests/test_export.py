@@ -18,6 +18,7 @@ from optlight.export import (
     joint_trajectory_text,
     json_safe,
     lp_direction,
+    lp_text,
     write_file,
     write_results,
 )
@@ -63,6 +64,13 @@ def plan(scale: float = 1.0) -> tuple[Trajectory, VerificationReport]:
 
 def directions() -> np.ndarray:
     return CAMERA.to_camera_frame(SPHERE.direction(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1]))
+
+
+def test_lp_text_writes_a_residue_as_zero() -> None:
+    """The default plan's first light lies straight to the right: its y component in the camera frame
+    is a residue (−8e-17), which .lp files once gave as −0.000000000."""
+    text = lp_text(["a.png", "b.png"], [[0.293204483, -7.9e-17, 0.956049754], [-0.5, 2e-10, -4e-10]])
+    assert text.splitlines() == ["2", "a.png 0.293204483 0.000000000 0.956049754", "b.png -0.500000000 0.000000000 0.000000000"]
 
 
 def test_lp_direction_hand_worked() -> None:
