@@ -7,8 +7,10 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from PIL import Image
 
+from optlight.geometry import LightSphere, sphere_frame
 from optlight.planning.timing import time_parameterize
 from optlight.robot import load_robot
 from optlight.scene import Scene
@@ -20,7 +22,7 @@ from optlight.viz.figures import (
     contact_sheet_figure,
     contact_sheet_images,
 )
-from optlight.viz.trajectory_figures import trajectory_figure
+from optlight.viz.trajectory_figures import path_figure, trajectory_figure
 
 
 def centroid(image: np.ndarray) -> np.ndarray:
@@ -119,3 +121,22 @@ def test_trajectory_figure_spans_the_motion_with_time_ticks_on_its_bottom_row():
         assert ax.get_xlabel() == "t [s]" and len(ax.get_xticks()) >= 3
     for ax in axes[:-1].ravel():
         assert len(ax.get_xticks()) == 0
+
+
+def test_the_path_figures_3d_labels_do_not_run_together():
+    """The 3-D view of the default plan's path (a 0.4 m sphere): at most five labelled ticks per axis
+    (matplotlib's default gave the x axis nine, whose labels ran into each other), drawn apart."""
+    center = np.array([0.5, 0.0, 0.4])
+    sphere = LightSphere(center, 0.4, sphere_frame(center, center + np.array([0.0, 0.0, 1.0])))
+    ring = sphere.position(np.full(12, 0.3), np.linspace(0.0, 2 * np.pi, 12, endpoint=False))
+    figure = path_figure(sphere, ring, ring, ring)
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()  # the ticks are laid out as in the PNG
+    view, renderer = figure.axes[1], canvas.get_renderer()
+    for axis in (view.xaxis, view.yaxis, view.zaxis):
+        lo, hi = sorted(axis.get_view_interval())
+        shown = zip(axis.get_majorticklocs(), axis.get_ticklabels(), strict=True)
+        labels = [label for at, label in shown if lo <= at <= hi and label.get_text()]
+        assert 2 <= len(labels) <= 5, [t.get_text() for t in labels]
+        boxes = [t.get_window_extent(renderer) for t in labels]
+        assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1 :]), labels  # apart

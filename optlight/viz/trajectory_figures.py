@@ -114,6 +114,10 @@ def save_trajectory_figure(
     return path
 
 
+#: Most tick intervals per axis of the path figure's 3-D view.
+PATH_3D_TICKS = 4
+
+
 def path_figure(
     sphere: LightSphere,
     planned: ArrayLike,
@@ -124,6 +128,7 @@ def path_figure(
     landmarks (world frame, m), as a polar projection (radius = zenith in degrees, angle = azimuth) and
     a 3-D view around O."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     fig = Figure(figsize=(10.5, 5.0))
     polar = cast("PolarAxes", fig.add_subplot(1, 2, 1, projection="polar"))
@@ -153,9 +158,9 @@ def path_figure(
     for label, pts in points.items():
         p = np.asarray(pts, float).reshape(-1, 3)
         ax3.plot(p[:, 0], p[:, 1], p[:, 2], **styles[label])
-    ax3.set_xlabel("x (m)")
-    ax3.set_ylabel("y (m)")
-    ax3.set_zlabel("z (m)")
+    for axis, name in ((ax3.xaxis, "x"), (ax3.yaxis, "y"), (ax3.zaxis, "z")):
+        axis.set_major_locator(MaxNLocator(PATH_3D_TICKS))  # the default's 9 x labels ran together
+        axis.set_label_text(f"{name} (m)")
     ax3.set_box_aspect((1, 1, 1))
     ax3.set_title("world frame", fontsize=10)
     # fixed margins: tight_layout measured every label of both axes first (a third of the time)
