@@ -16,7 +16,7 @@ import pytest
 from PIL import Image
 from scipy.ndimage import binary_erosion
 
-from optlight.capture import ModelCamera, linearise, respond, write_capture_png
+from optlight.capture import ModelCamera, calibration, linearise, respond, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera, MissingCaptureError
 from optlight.capture.mitsuba import MitsubaCamera
@@ -24,7 +24,7 @@ from optlight.errors import ProblemError
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff, lambertian
 from optlight.setup import Setup
-from optlight.spec import LoopSpec, WorldSpec, problem_from_dict
+from optlight.spec import LightSpec, LoopSpec, WorldSpec, problem_from_dict
 
 #: Lights (zenith, azimuth in degrees) of the calibration captures.
 LIGHTS_DEG = [(20, 0), (35, 60), (50, 120), (30, 180), (45, 240), (25, 300), (55, 30), (40, 90)]
@@ -316,3 +316,39 @@ def test_scene_response_has_the_finite_difference_gradient() -> None:
         [(np.asarray(f(a0 + h * e, v)) - np.asarray(f(a0 - h * e, v))).ravel() / (2 * h) for e in np.eye(3)]
     )
     np.testing.assert_allclose(analytic, numeric, rtol=1e-5, atol=1e-6)
+
+
+def test_the_fit_at_a_gamma_is_the_least_squares_of_every_used_entry() -> None:
+    """The calibration's fit at one γ sums per pixel over the captures once (``_Entries``) instead of
+    over every entry at every sweep. Against the alternating least squares written entry by entry
+    (c_p from Σ_k over pixel p's used entries, then (A, B) by least squares over all of them,
+    renormalised), on random shading with left-out entries, a pixel never lit and one never used:
+    the same A, B, c, prediction and cost."""
+    rng = np.random.default_rng(3)
+    k, p, s = 7, 300, 1.0
+    light = LightSpec(power=0.9, ambient=0.04)
+    shade = np.clip(rng.normal(0.5, 0.35, (k, p)), 0.0, None)
+    shade[:, 0] = 0.0  # never lit: not calibrated, its factor stays 1
+    rho = rng.uniform(0.3, 0.9, p)
+    truth = rng.uniform(0.7, 1.3, p) * rho * (0.8 * shade + 0.05)
+    y = respond(truth * (1 + 0.01 * rng.normal(size=(k, p))), s, 1.7)
+    weights = rng.uniform(size=(k, p)) > 0.2
+    weights[:, 1] = False  # never used
+    fit = calibration._fit(y, calibration._Entries.of(weights, shade), rho, 1.7, s, light.gain, light)
+
+    w, linear = weights.astype(float), linearise(y, s, 1.7)
+    calibrated = (weights.sum(axis=0) >= 2) & ((weights & (shade > 0)).sum(axis=0) >= 1)
+    a, b = light.gain * light.power, light.gain * light.ambient
+    for _ in range(calibration.SWEEPS):
+        m = rho * (a * shade + b)
+        c = np.where(calibrated, (w * linear * m).sum(axis=0) / np.maximum((w * m * m).sum(axis=0), 1e-300), 1.0)
+        design = np.stack([(c * rho * shade)[weights], np.broadcast_to(c * rho, shade.shape)[weights]], axis=1)
+        a, b = np.linalg.lstsq(design, linear[weights], rcond=None)[0]
+        scale = np.median(c[calibrated])
+        c, a, b = np.where(calibrated, c / scale, 1.0), a * scale, b * scale
+    prediction = c * rho * (a * shade + b)
+    cost = float((w * (y - respond(prediction, s, 1.7)) ** 2).sum())
+    assert (fit.a, fit.b, fit.cost) == pytest.approx((a, b, cost), rel=1e-9)
+    np.testing.assert_allclose(fit.c, c, rtol=1e-9)
+    np.testing.assert_allclose(fit.prediction, prediction, rtol=1e-9, atol=1e-12)
+    assert fit.c[0] == fit.c[1] == 1.0 and not fit.calibrated[:2].any()

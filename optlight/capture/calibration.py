@@ -244,16 +244,16 @@ def _robust_fit(scene: Scene, y: Array, positions: Array, spec: LoopSpec) -> _Ro
     rho = scene.gbuffer.albedo
     fit: _Fit | None = None
     for _ in range(ROUNDS):
-        weights = geometry & ~specular
+        used = _Entries.of(geometry & ~specular, shade)
         result = minimize_scalar(
-            lambda t, w=weights: _fit(y, shade, rho, w, np.exp(t), s, g, light).cost,
+            lambda t, used=used: _fit(y, used, rho, np.exp(t), s, g, light).cost,
             bounds=tuple(np.log(GAMMA_RANGE)),
             method="bounded",
             options={"xatol": 1e-5},
         )
-        fit = _fit(y, shade, rho, weights, float(np.exp(result.x)), s, g, light)
+        fit = _fit(y, used, rho, float(np.exp(result.x)), s, g, light)
         residual = linearise(y, s, fit.gamma) - fit.prediction
-        r = residual[weights]
+        r = residual[used.weights]
         sigma = max(1.4826 * float(np.median(np.abs(r - np.median(r)))), MAD_FLOOR * s)
         new = geometry & (residual > spec.specular_mad * sigma)
         if np.array_equal(new, specular):
@@ -274,22 +274,61 @@ class _Fit:
     cost: float
 
 
-def _fit(
-    y: Array, shade: Array, rho: Array, weights: NDArray[np.bool_], gamma: float, s: float, g: float, light: LightSpec
-) -> _Fit:
-    """Alternating least squares for A, B, c at a given γ (module docstring, step 3)."""
+@dataclass(frozen=True)
+class _Entries:
+    """The entries (k, p) a fit uses (``weights`` (K, P)), their shading ``shade`` (K, P) and what
+    every γ's fit needs of them, summed over the captures per pixel once: W_p = Σ_k w_kp,
+    S1_p = Σ_k w_kp S_kp, S2_p = Σ_k w_kp S_kp², and the pixels ``calibrated`` (used by two entries
+    or more, one of them lit)."""
+
+    weights: NDArray[np.bool_]
+    shade: Array
+    count: Array
+    shade_sum: Array
+    shade_square_sum: Array
+    calibrated: NDArray[np.bool_]
+
+    @classmethod
+    def of(cls, weights: NDArray[np.bool_], shade: Array) -> _Entries:
+        w = weights.astype(float)
+        return cls(
+            weights=weights,
+            shade=shade,
+            count=w.sum(axis=0),
+            shade_sum=(w * shade).sum(axis=0),
+            shade_square_sum=(w * shade * shade).sum(axis=0),
+            calibrated=(weights.sum(axis=0) >= 2) & ((weights & (shade > 0)).sum(axis=0) >= 1),
+        )
+
+
+def _fit(y: Array, used: _Entries, rho: Array, gamma: float, s: float, g: float, light: LightSpec) -> _Fit:
+    """Alternating least squares for A, B, c at a given γ (module docstring, step 3) on the ``used``
+    entries of the recorded values ``y`` (K, P).
+
+    With m_kp = ρ_p (A S_kp + B) and L the linearised values, each sweep solves
+        c_p = Σ_k w L m / Σ_k w m² = ρ_p (A LS_p + B L1_p) / (ρ_p² (A² S2_p + 2AB S1_p + B² W_p)),
+    then (A, B) from the 2 × 2 normal equations of Σ w (L − c ρ (A S + B))², whose entries are
+    Σ_p (cρ)² (S2, S1, W) and Σ_p cρ (LS, L1): per-pixel sums over the captures (:class:`_Entries`;
+    LS_p = Σ_k w L S, L1_p = Σ_k w L, once per γ), so a sweep costs O(P), not O(K·P). The same
+    solution as summing every entry at every sweep (to ~1e-13: the sums are taken in another order);
+    the default face's loop round spent ~95 % of its time there (36 captures × 29,386 pixels, ~40
+    sweeps per fit, ~75 fits per round): 35 → ~5 s."""
     linear = linearise(y, s, gamma)
-    w = weights.astype(float)
-    calibrated = (weights.sum(axis=0) >= 2) & ((weights & (shade > 0)).sum(axis=0) >= 1)
+    w = used.weights.astype(float)
+    wl = w * linear
+    linear_sum, linear_shade_sum = wl.sum(axis=0), (wl * used.shade).sum(axis=0)
+    count, s1, s2, calibrated = used.count, used.shade_sum, used.shade_square_sum, used.calibrated
     a, b = g * light.power, g * light.ambient
     c = np.ones(rho.size)
     for _ in range(SWEEPS):
-        m = rho * (a * shade + b)
-        den = (w * m * m).sum(axis=0)
-        c = np.where(calibrated & (den > 0), (w * linear * m).sum(axis=0) / np.where(den > 0, den, 1.0), 1.0)
-        x1, x2 = c * rho * shade, np.broadcast_to(c * rho, shade.shape)
-        normal = np.array([[(w * x1 * x1).sum(), (w * x1 * x2).sum()], [(w * x1 * x2).sum(), (w * x2 * x2).sum()]])
-        rhs = np.array([(w * x1 * linear).sum(), (w * x2 * linear).sum()])
+        den = rho * rho * (a * a * s2 + 2.0 * a * b * s1 + b * b * count)
+        num = rho * (a * linear_shade_sum + b * linear_sum)
+        c = np.where(calibrated & (den > 0), num / np.where(den > 0, den, 1.0), 1.0)
+        cr = c * rho
+        cr2 = cr * cr
+        off = float((cr2 * s1).sum())
+        normal = np.array([[float((cr2 * s2).sum()), off], [off, float((cr2 * count).sum())]])
+        rhs = np.array([(cr * linear_shade_sum).sum(), (cr * linear_sum).sum()])
         a_new, b_new = np.linalg.lstsq(normal, rhs, rcond=None)[0]
         scale = float(np.median(c[calibrated])) if calibrated.any() else 1.0
         c = np.where(calibrated, c / scale, 1.0)
@@ -298,7 +337,7 @@ def _fit(
         a, b = float(a_new), float(b_new)
         if done:
             break
-    prediction = c * rho * (a * shade + b)
+    prediction = c * rho * (a * used.shade + b)
     cost = float((w * (y - respond(prediction, s, gamma)) ** 2).sum())
     return _Fit(a, b, c, calibrated, gamma, prediction, cost)
 
