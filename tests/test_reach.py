@@ -10,6 +10,7 @@ import casadi as ca
 import numpy as np
 import pytest
 from conftest import REACH_ONLY, reduced_problem
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from optlight.geometry import LightSphere, direction_in_sphere_frame
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
@@ -100,6 +101,14 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
     assert png.stat().st_size > 10_000
     data = json.loads(js.read_text())
     assert data["environment"] is True and data["taken_fraction"] == reach.taken_fraction
+    # the legend (taken cells) lies below the polar plot and its labels: it once covered the 270° one
+    figure = reach.figure()
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    (legend,) = figure.legends
+    polar = figure.axes[0].get_tightbbox(renderer)
+    assert legend.get_window_extent(renderer).y1 <= polar.y0
     i, j = np.argwhere(reach.taken)[0]
     assert data["status"][i][j] == "taken" and data["success"][i][j] is True and data["clearance_m"][i][j] < 0
 

@@ -196,8 +196,8 @@ class ReachabilityMap:
         if lights is not None:
             zenith, azimuth = angles_of(lights)
             ax.plot(azimuth, np.rad2deg(zenith), "*", color="white", mec="black", ms=11, label="lights")
-        if taken.any() or len(zi) or lights is not None:
-            ax.legend(loc="lower left", bbox_to_anchor=(-0.15, -0.12))
+        if taken.any() or len(zi) or lights is not None:  # below the plot: inside it, it covered the 270° label
+            fig.legend(loc="outside lower center", ncols=3, frameon=False)
         ax.set_ylim(0.0, r_edges[-1])  # radial limits
         title = f"{self.robot}: light cap reachable in {100 * self.reachable_fraction:.1f} % of cells"
         if self.environment:
