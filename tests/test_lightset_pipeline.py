@@ -162,6 +162,33 @@ def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: 
             assert reacher.attempt(position, start).theta is None, "a better light was passed over"
 
 
+def test_a_grid_light_is_not_replaced_onto_another_light_of_the_set() -> None:
+    """Two grid lights the robot cannot reach must not share a replacement (yale_grid once captured
+    64 images at 61 lights): with another light of the set standing where the rule would put the
+    replaced one, the rule picks a light at least ``[landmarks] distinct_deg`` from every other."""
+    grid = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8, "design_over": "cap"}
+    setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32, lightset=grid))
+    _, design, captures, _ = choose_captures(setup)
+    assert design is not None
+    reacher = Reacher(setup)
+    light, other = captures[3], captures[4]
+    attempts = [reacher.attempt(light.position, setup.robot.theta_ref)]
+    sphere = setup.sphere
+
+    def replaced_direction(rule: SetReplacement) -> np.ndarray:
+        found = rule(light, attempts, setup.robot.theta_ref)
+        assert not isinstance(found, str), found
+        return (found[0].position - sphere.center) @ sphere.rotation / sphere.radius
+
+    alone = replaced_direction(SetReplacement(setup, design, captures, reacher))
+    rule = SetReplacement(setup, design, captures, reacher)
+    rule.directions[other.index] = alone  # another light of the set where the replacement would go
+    apart = replaced_direction(rule)
+    others = np.array([d for i, d in rule.directions.items() if i != light.index])
+    closest = math.degrees(math.acos(float(np.clip((others @ apart).max(), -1.0, 1.0))))
+    assert closest >= setup.landmark_spec.distinct_deg
+
+
 def test_a_set_designed_over_the_reachable_lights_is_placed_where_it_was_designed() -> None:
     """rti_dome, 8 lights. Designed on the cap alone, the placement has to replace 3 of them (the arm
     reaches them only across the camera's view cone). Designed over the reachability map, every light

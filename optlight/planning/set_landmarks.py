@@ -227,8 +227,9 @@ class SetReplacement:
     first tried from the clear postures the map found at the :data:`MAP_STARTS` cells nearest it (the
     previous light's posture may be on an IK branch that blocks the camera there). Else, of the
     allowed cap's lattice at ``[lightset] candidate_spacing_deg``, the :data:`REPLACEMENT_CANDIDATES`
-    lights nearest the one replaced (with a map, only those its clear field puts on the clear side)
-    are scored — designed kinds by the set cost with the other lights where they are (those replaced
+    lights nearest the one replaced (with a map, only those its clear field puts on the clear side;
+    none within ``[landmarks] distinct_deg`` of another light of the set, which would be the same
+    capture twice) are scored — designed kinds by the set cost with the other lights where they are (those replaced
     before at their replacements), a grid by the angle to its requested direction — and tried with
     the robot (:meth:`Reacher.attempt`) best score first: from the previous light's angles (its IK
     branch), then from the map's posture nearest each, then from θ_ref with restarts. The first
@@ -286,6 +287,12 @@ class SetReplacement:
         nearest = np.argsort(-(self.lattice @ here))[:REPLACEMENT_CANDIDATES]
         if self.field is not None:
             nearest = nearest[self.field.numpy(self.lattice[nearest]) > 0.0]
+        # not onto another light of the set: a grid's score (the angle to its own direction) does not
+        # see the others, and two unreachable yale_grid lights took the same replacement (64 captures,
+        # 61 distinct lights)
+        others = np.array([d for i, d in self.directions.items() if i != lm.index]).reshape(-1, 3)
+        apart = math.cos(math.radians(setup.landmark_spec.distinct_deg))
+        nearest = nearest[(self.lattice[nearest] @ others.T).max(axis=1, initial=-1.0) < apart]
         scores = self._scores(lm.index, self.lattice[nearest])
         tried = nearest[np.argsort(scores, kind="stable")][:REPLACEMENT_TRIES]
         # first from the previous light's angles alone (the posture chain's IK branch: a restart may
