@@ -118,8 +118,9 @@ def test_grid_replaces_the_lights_in_the_camera_view() -> None:
 def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: str) -> None:
     """SetReplacement against brute force: every candidate near the light that scores better than the
     replacement (a lower set cost with the other lights fixed; for a grid, nearer the requested
-    direction) is one the robot does not reach clear, and the replacement's joint angles put the
-    light there (pinocchio) with every environment row clear."""
+    direction) is one the robot does not reach clear or one on another light of the set (within
+    ``[landmarks] distinct_deg``), and the replacement's joint angles put the light there
+    (pinocchio) with every environment row clear."""
     sections: dict = {"count": 8, "starts": 1, "design_over": "cap"}  # the rule alone, without the map
     if kind == "grid":
         sections = {"kind": "grid", "grid_deg": [[20.0 * i, 30.0] for i in range(8)], "count": 8, "design_over": "cap"}
@@ -149,7 +150,8 @@ def test_a_light_is_replaced_by_the_reachable_one_that_best_keeps_the_set(kind: 
 
     chosen = (replacement.position - sphere.center) @ sphere.rotation / sphere.radius
     nearest = rule.lattice[np.argsort(-(rule.lattice @ here))[:40]]
-    better = [d for d in nearest if score(d) < score(chosen) - 1e-12]
+    apart = math.cos(math.radians(setup.landmark_spec.distinct_deg))
+    better = [d for d in nearest if score(d) < score(chosen) - 1e-12 and (others @ d).max() < apart]
     # the rule keeps the previous light's IK branch (here θ_ref's) when it can, and restarts otherwise
     start = setup.robot.theta_ref
     direct = reacher.attempt(replacement.position, start, restarts=False).theta is not None
