@@ -30,13 +30,12 @@ import numpy as np
 from optlight import interrupts
 from optlight.errors import OptlightError, UsageError, VerificationError
 from optlight.spec import available_problems, load_problem, resolve_problem_path
+from optlight.threads import WORKERS_PER_CORE, max_local_workers
 
 #: What ``--force`` allows, as the output policy's errors say it.
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
-#: Most worker processes of a local cluster (``batch``, ``cell``).
-MAX_WORKERS = 1024
 #: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
 #: import can break a library for the rest of the run (trimesh catches it while importing an optional
 #: part and leaves an error wrapper where a class should be).
@@ -74,11 +73,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_render(args: argparse.Namespace) -> int:
     from optlight.export import check_output_file, write_file
     from optlight.scene import Scene
-    from optlight.viz.images import save_gray_png
+    from optlight.viz.images import save_gray_png, written_by_optlight
 
     if Path(args.out).suffix.lower() != ".png":
         raise UsageError("--out", f"{args.out}: expected a .png file name")
-    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)
+    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE, ours=written_by_optlight)
     problem = load_problem(args.problem)
     scene = Scene.from_problem(problem)  # all a render needs (and the check of the object and camera)
     position = scene.sphere.position(np.deg2rad(args.zenith), np.deg2rad(args.azimuth))
@@ -89,6 +88,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         overwrite=args.force,
         option="--out",
         force=FORCE,
+        ours=written_by_optlight,
     )
     print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
     return 0
@@ -390,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="light azimuth, degrees (90 = from above)",
     )
     p.add_argument("--out", required=True, help="output PNG file (not an existing one unless --force)")
-    p.add_argument("--force", action="store_true", help="replace an existing PNG file")
+    p.add_argument("--force", action="store_true", help="replace a PNG that optlight rendered there")
     p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
     p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
     p.add_argument(
@@ -420,9 +420,9 @@ def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--workers",
-        type=integer(1, MAX_WORKERS, "worker processes"),
+        type=integer(1, max_local_workers(), f"worker processes ({WORKERS_PER_CORE} per usable core here)"),
         metavar="N",
-        help="local cluster worker processes (default: one per core)",
+        help=f"local cluster worker processes (default: one per core; at most {WORKERS_PER_CORE} per core)",
     )
 
 

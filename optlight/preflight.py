@@ -4,7 +4,8 @@
 :class:`~optlight.setup.Setup`: that build is the check of what the problem file alone cannot show
 (the object's mesh loads, the light sphere holds the object, the camera sees it, the reference image
 and mask load and cover object pixels, the URDF parses, its meshes resolve and it has the flange
-frame, the environment's layout, the solve's estimated memory fits in this machine's). The command
+frame, the environment's layout, a grid light set's directions are distinct, the solve's estimated
+memory and the trajectory's samples fit in this machine's). The command
 then hands that same Setup to :func:`optlight.solve` or :func:`optlight.reachability_map`, so nothing
 is built twice. What the Setup does not build is checked here: a user URDF's visual and collision
 meshes must load (the preview, the view check and the environment read them only after the solve).
