@@ -42,7 +42,6 @@ from optlight.environment import CAPTURE_SLACK, LIGHT, Environment
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
-from optlight.planning.lightsets import grid_from_problem
 from optlight.robot import Robot, ik_settings, load_robot
 from optlight.scene import Scene
 from optlight.spec import (
@@ -105,8 +104,6 @@ class Setup:
         """Build the setup of a problem (a :class:`Problem`, a file path or a built-in name)."""
         problem = problem if isinstance(problem, Problem) else load_problem(problem)
         check_memory(problem)  # this machine's memory (spec.check_memory), before the large allocations
-        # a grid's directions, read (and checked distinct) now, though the light-set stage reads them again
-        grid = grid_from_problem(problem) if problem.lightset.kind == "grid" else None
         scene = Scene.from_problem(problem)
         search_scene = _search_scene(scene, problem.landmarks.resolution)
         objective = Objective.from_problem(problem, scene)
@@ -122,7 +119,7 @@ class Setup:
             velocity=limits.velocity,
             acceleration=limits.acceleration,
             jerk=limits.jerk,
-            captures=planned_captures(problem, None if grid is None else len(grid.names)),
+            captures=planned_captures(problem),
         )
         environment = (
             Environment.from_problem(problem, scene.mesh.vertices)

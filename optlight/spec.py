@@ -788,13 +788,22 @@ def check_memory(problem: Problem) -> None:
 SAMPLE_BYTES_PER_JOINT = 250.0
 
 
-def planned_captures(problem: Problem, grid_size: int | None = None) -> int:
+def planned_captures(problem: Problem) -> int:
     """The captures a plan of ``problem`` is planned with: ``[lightset] count`` for a designed set,
-    the grid's length for a grid (``grid_size``: that of a grid file, read by the caller; the 64 Yale B
-    directions by default), else ``[landmarks] count`` (landmarks that merge make fewer)."""
+    the grid's length for a grid (``grid_deg``'s pairs, a ``grid_file``'s lines that are neither
+    blank, comments nor its header; the 64 Yale B directions by default), else ``[landmarks] count``
+    (landmarks that merge make fewer)."""
     ls = problem.lightset
     if ls.kind == "grid":
-        return grid_size if grid_size is not None else len(ls.grid_deg) if ls.grid_deg else 64
+        if ls.grid_deg is not None:
+            return len(ls.grid_deg)
+        if ls.grid_file is None:
+            return 64
+        try:
+            lines = problem.resolve(ls.grid_file).read_text().splitlines()
+        except (OSError, UnicodeDecodeError):
+            return 1  # the grid's reader names the file and the key
+        return max(sum(1 for s in lines if s.strip() and not s.lstrip().startswith("#")) - 1, 1)
     return ls.count if ls.kind != "none" else problem.landmarks.count
 
 
