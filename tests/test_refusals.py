@@ -457,3 +457,22 @@ def test_a_timed_trajectory_too_long_for_the_memory_names_its_cause(monkeypatch:
         check_trajectory_samples(slow, 7, budget / 1000.0 * 1.01, 1.0)
     with pytest.raises(ProblemError, match=r"trajectory\.dwell_s"):
         check_trajectory_samples(slow, 7, budget / 1000.0 * 1.01, budget / 1000.0)
+
+
+def test_a_solve_whose_timed_trajectory_outgrows_the_memory_stops_before_sampling_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With memory for ~3.5 s of samples at 1 kHz the small problem passes the estimate made before
+    the work (6 dwells of 0.5 s and short moves: ~3 s), but its timed trajectory is longer: the solve
+    stops with a refusal that names the key, and the trajectory is never sampled (the verification
+    does not run)."""
+    import optlight.pipeline
+
+    problem = reduced_problem(camera_px=64, landmarks={"count": 6})
+    per_sample = optlight.spec.SAMPLE_BYTES_PER_JOINT * 7
+    memory = (optlight.spec.estimated_peak_memory(problem) + 3500 * per_sample) / optlight.spec.MEMORY_SAFETY
+    monkeypatch.setattr(optlight.spec, "available_memory", lambda: memory)
+    monkeypatch.setattr(optlight.pipeline, "verify_knots", started)
+    cause = r"(robot\.velocity_scale|trajectory\.dwell_s): .*the timed trajectory lasts"
+    with pytest.raises(ProblemError, match=cause):
+        optlight.solve(problem)
