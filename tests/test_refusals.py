@@ -126,7 +126,8 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
     (
         "acceleration limit 1e-9",
         ["check", "{acceleration}"],
-        r"{acceleration}: robot\.acceleration_limit: expected limits ≥ [0-9.e+]+ × the present ones .* on this machine",
+        r"{acceleration}: robot\.acceleration_limit: expected limits ≥ [0-9.e+]+ × the present ones "
+        r".* on this machine",
         [],
     ),
     (
@@ -144,7 +145,8 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
     (
         "a thousand workers",
         ["batch", "{million}", "--workers", "1000", "--out", "out_workers"],
-        r"optlight batch: argument --workers: expected an integer number of worker processes \(4 per usable core here\) in \[1, \d+\], got 1000",
+        r"optlight batch: argument --workers: expected an integer number of worker processes "
+        r"\(4 per usable core here\) in \[1, \d+\], got 1000",
         ["out_workers"],
     ),
     (
@@ -157,13 +159,15 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
     (
         "velocity scale 1e-12",
         ["solve", "{velocity}", "--out", "out_velocity"],
-        r"{velocity}: robot\.velocity_scale: expected a value ≥ [0-9.e+-]+ on this machine: .* got 1e-12$",
+        r"{velocity}: robot\.velocity_scale: expected a value ≥ [0-9.e+-]+ on this machine: "
+        r".* got 1e-12$",
         ["out_velocity"],
     ),
     (
         "rate of a gigahertz",
         ["check", "{rate}"],
-        r"{rate}: trajectory\.rate_hz: expected a value ≤ [0-9.e+]+ Hz on this machine: .* got 1000000000\.0$",
+        r"{rate}: trajectory\.rate_hz: expected a value ≤ [0-9.e+]+ Hz on this machine: "
+        r".* got 1000000000\.0$",
         [],
     ),
     # bad input that was accepted
@@ -199,8 +203,18 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
         r"{power_zero}: world\.power_scale: expected a value > 0, got 0\.0$",
         ["out_power"],
     ),
-    ("world albedo scale 0", ["check", "{albedo_zero}"], r"{albedo_zero}: world\.albedo_scale: expected a value > 0", []),
-    ("world gamma 1000", ["check", "{gamma_huge}"], r"{gamma_huge}: world\.gamma: expected a value ≤ 10, got 1000\.0$", []),
+    (
+        "world albedo scale 0",
+        ["check", "{albedo_zero}"],
+        r"{albedo_zero}: world\.albedo_scale: expected a value > 0",
+        [],
+    ),
+    (
+        "world gamma 1000",
+        ["check", "{gamma_huge}"],
+        r"{gamma_huge}: world\.gamma: expected a value ≤ 10, got 1000\.0$",
+        [],
+    ),
     (
         "world noise above the saturation",
         ["check", "{noise_huge}"],
@@ -213,11 +227,17 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
         r"{offset_huge}: world\.light_offset_m: expected an offset shorter than the light sphere's radius",
         [],
     ),
-    ("world seed negative", ["check", "{seed_negative}"], r"{seed_negative}: world\.seed: expected a value ≥ 0, got -1$", []),
+    (
+        "world seed negative",
+        ["check", "{seed_negative}"],
+        r"{seed_negative}: world\.seed: expected a value ≥ 0, got -1$",
+        [],
+    ),
     (
         "render --force over the user's own PNG",
         ["render", "{small}", "--zenith", "10", "--azimuth", "0", "--out", "photo.png", "--force"],
-        r"--out: photo\.png exists and optlight did not write it; --force replaces only a file optlight wrote$",
+        r"--out: photo\.png exists and optlight did not write it; "
+        r"--force replaces only a file optlight wrote$",
         [],
     ),
     (
@@ -237,7 +257,11 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
 ]
 
 #: Rows that also run as real subprocesses (their refusal does not depend on the memory available).
-SUBPROCESS_ROWS = {"velocity scale 1e-12", "a batch grid of a million rows", "render --force over the user's own PNG"}
+SUBPROCESS_ROWS = {
+    "velocity scale 1e-12",
+    "a batch grid of a million rows",
+    "render --force over the user's own PNG",
+}
 
 
 def make_workspace(root: Path) -> dict[str, str]:
@@ -248,7 +272,9 @@ def make_workspace(root: Path) -> dict[str, str]:
     Image.fromarray(np.full((64, 64), 128, np.uint8)).save(images / "grey64.png")
     Image.fromarray(np.full((32, 32), 255, np.uint8)).save(images / "mask32.png")
     (root / "twice.csv").write_text("azimuth_deg,elevation_deg,name\n0,30,front\n20,10,side\n0,30,again\n")
-    Image.fromarray(np.arange(64 * 64, dtype=np.uint32).reshape(64, 64).astype(np.uint8)).save(root / "photo.png")
+    Image.fromarray(np.arange(64 * 64, dtype=np.uint32).reshape(64, 64).astype(np.uint8)).save(
+        root / "photo.png"
+    )
     files = {}
     for name, data in PROBLEMS.items():
         path = root / f"{name}.toml"
