@@ -1,4 +1,4 @@
-"""Landmarks (paper Section 4, DESIGN §5): where on the light sphere the light should go.
+"""Landmarks (paper Section 4, docs/design.md §5): where on the light sphere the light should go.
 
 Azimuth mode (the paper's). For ``M`` equally spaced azimuths ``φ_j = 2πj/M`` find
 
@@ -19,7 +19,7 @@ light at ``a(θ, φ_j)``. ``D`` is multimodal in θ, so per azimuth:
    is fixed, so a derivative-free 1-D search converges in ~10 renders. A seed on an end of the
    allowed zeniths that ``D`` rises from (``D`` at :data:`REFINE_TOL` inside, mask fixed, above the
    seed's) is not searched: the search would end on it within its tolerance (the default face's
-   landmarks lie on the view's boundary: its search 0.68 → 0.61 s, every landmark the same);
+   landmarks lie on the view's boundary, so skipping those seeds saves a tenth of its search);
 4. *select*: the best sweep sample and the refined zeniths are scored with the NumPy renderer and
    shadow rays; the lowest wins, so the landmark is never worse than the best sweep sample;
 5. *polish* (only when the search resolution is below the camera's): one parabolic step of the

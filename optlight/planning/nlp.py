@@ -5,7 +5,7 @@ The landmark refiners (:mod:`.landmarks`), the joint-space placement and the cle
 cost. Written once here, so that "the light is on the sphere and aimed at O" or "the light is pinned
 at a*" means the same expression in every NLP:
 
-- :func:`light_rows` h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ (m, DESIGN §3), 3 equality rows;
+- :func:`light_rows` h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ (m, docs/design.md §3), 3 equality rows;
 - :func:`pin_rows` t₁ᵀ (a − a*), t₂ᵀ (a − a*) (m): the light at a* to first order on the sphere,
   2 equality rows, with t₁, t₂ from :func:`tangent_basis` at a*;
 - :func:`arc_rows` nᵀ(a − O) (on the great circle of normal n, 1 equality) and the two wedge rows

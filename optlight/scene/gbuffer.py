@@ -1,4 +1,4 @@
-"""G-buffer and shadow rays: what the camera sees of the object, per pixel (DESIGN §4).
+"""G-buffer and shadow rays: what the camera sees of the object, per pixel (docs/design.md §4).
 
 Rays are cast with Embree (``embreex``, :class:`RayCaster`); trimesh's pure NumPy ray caster is
 ~400× slower and is never used. Embree's queries release the GIL, so a large batch is split over
