@@ -680,10 +680,10 @@ def image_names(pattern: str, count: int) -> list[str]:
 
 #: Peak memory of a solve: a fixed part (the libraries, the robot, the NLPs; ~250 MB over the
 #: imports) plus a part per object pixel at the camera's resolution (rays, G-buffer, images). Whole
-#: solves of the default problem grew by ~800 bytes per pixel at 256²–1024² when measured two stops
-#: ago, ~80 at 128²–320² now; the constant keeps the larger (temporaries of the G-buffer's rays grow
-#: with the image). The soft histogram no longer adds bytes per pixel and bin: its NumPy kernel runs
-#: in chunks of fixed size (0.9 byte per pixel and bin measured, 32 → 128 bins at 320²; it was 72).
+#: solves of the default problem grow by ~80 bytes per pixel at 128²–320² and by up to ~800 at
+#: 256²–1024²; the constant keeps the larger (temporaries of the G-buffer's rays grow with the
+#: image). The soft histogram adds almost nothing per pixel and bin: its NumPy kernel runs in chunks
+#: of fixed size (~1 byte per pixel and bin, 32 → 128 bins at 320²).
 #: Every image pixel is counted as an object pixel, since the object may fill the image.
 MEMORY_BASE_BYTES = 600e6
 MEMORY_BYTES_PER_PIXEL = 1200.0

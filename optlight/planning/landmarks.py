@@ -591,8 +591,8 @@ def _azimuth_mode(search: _Search, progress: Progress | None, found: Callable[[L
 
     # The next azimuth's shadow rays are cast in the background while this one's sweep objective,
     # refinement and camera-resolution scores are computed here: ~12 ms of rays there against
-    # ~16 ms here on the default face (with the objective there too, the background took ~15 ms
-    # against ~10 ms here, and this thread waited). The same numbers either way.
+    # ~16 ms here on the default face (with the objective there too, the background would take ~15 ms
+    # against ~10 ms here, and this thread would wait). The same numbers either way.
     pending = in_background(partial(shadows, 0, False))
     pole: tuple[float, Array] | None = None
     t0 = time.perf_counter()

@@ -98,8 +98,8 @@ def _start_worker() -> None:
 
 def _exit_now() -> None:
     """End the worker with status 0 without the rest of the interpreter's shutdown: freeing
-    matplotlib's and CasADi's modules took 0.2–0.3 s, which closing the worker waited for at the end
-    of every command. Nothing is lost: each PNG went back through a pipe written synchronously
+    matplotlib's and CasADi's modules takes 0.2–0.3 s, which closing the worker would wait for at the
+    end of every command. Nothing is lost: each PNG went back through a pipe written synchronously
     before the worker took its next job, and its standard streams are flushed here."""
     for stream in (sys.stdout, sys.stderr):
         if stream is not None:
