@@ -339,6 +339,7 @@ def save_results(
                 image_pattern=traj_spec.image_pattern,
                 light_directions_camera=light_directions_camera,
                 light_positions=np.array([lm.position for lm in visited]),
+                light_angles_deg=np.rad2deg([(lm.zenith, lm.azimuth) for lm in visited]).reshape(-1, 2),
                 joint_names=robot.joint_names,
             )
         ]

@@ -391,6 +391,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
         image_pattern="cap_{index:02d}.png",
         light_directions_camera=directions(),
         light_positions=positions,
+        light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
         joint_names=NAMES,
     )
     with path.open() as f:
@@ -414,6 +415,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
             image_pattern="x{index}",
             light_directions_camera=directions(),
             light_positions=positions,
+            light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
             joint_names=NAMES,
         )
 
