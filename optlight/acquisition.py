@@ -360,7 +360,8 @@ class Acquisition:
             "## Files",
             "",
             "- `captures.csv`, `lights.lp` and the images they name: the best round's captures, 16-bit "
-            "greyscale PNG, linear (0 is black, 65535 the saturation value), the same names in both files",
+            "greyscale PNG of the recorded values (0 is black, 65535 the saturation value; the camera's "
+            "response is calibration.json's `gamma`), the same names in both files",
             per_round,
             "- `calibration.json`, `albedo_factor.npy` (H, W), `normals.npy` (H, W, 3, world frame; zeros "
             "where not recovered): the calibrated model",
