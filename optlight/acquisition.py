@@ -16,11 +16,16 @@ dataset folder.
 4. the model is calibrated from every usable capture so far (:func:`~optlight.capture.calibration.calibrate`)
    and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
    through the same :func:`optlight.solve`;
-5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
+5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measure is not at
    least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails to solve or
-   fails verification (the reason is the status; the first plan's is raised). The best plan by measured cost, by the
-   same rule (a later round replaces it only at least ``tolerance`` below), is the result; the first
-   plan is the open loop's.
+   fails verification (the reason is the status; the first plan's is raised). The best plan by its
+   measure, by the same rule (a later round replaces it only at least ``tolerance`` below), is the
+   result; the first plan is the open loop's.
+
+The measure follows the task (:func:`round_measure`, :data:`MEASURES`): landmarks, the measured cost;
+a light set, the set's own measure (photometric stereo: the normal error of the normals recovered
+from the recorded images against the model's; RTI: the covering radius of the captured lights; a
+grid: the angle from its directions to the lights captured for them). Lower is better for each.
 
 With a real camera (the folder camera) the loop runs in rounds, one run of the command per round
 (:class:`RoundFolders`; the user's procedure is docs/camera-loop.md). Round i's plan is written to
@@ -56,7 +61,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.capture import Capture, CaptureCamera, ModelCamera, write_capture_png
+from optlight.capture import Capture, CaptureCamera, ModelCamera, linearise, write_capture_png
 from optlight.capture.calibration import Calibration, calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera, MissingCaptureError, read_captures_csv
 from optlight.errors import OptlightError, UsageError, VerificationError
@@ -71,8 +76,10 @@ from optlight.export import (
     write_folder,
 )
 from optlight.jsondata import json_safe
+from optlight.photometric_stereo import gbuffer_normal_map, recover_from_scene
 from optlight.pipeline import solve
 from optlight.plan import Plan
+from optlight.planning.lightsets import Cap, coverage
 from optlight.planning.nlp import sphere_position
 from optlight.robot import generalized_ik
 from optlight.scene import Camera
@@ -195,6 +202,47 @@ def modelled_costs(model: Setup, positions: ArrayLike) -> Array:
     return np.array([model.objective.numpy(model.scene.pixels(a)) for a in np.asarray(positions, float)])
 
 
+#: What the loop judges a round by, per ``[lightset] kind`` (:func:`round_measure`); lower is better.
+MEASURES = {
+    "none": "measured cost",
+    "photometric_stereo": "photometric-stereo normal error (deg)",
+    "rti": "RTI covering radius (deg)",
+    "grid": "grid angular error (deg)",
+}
+
+
+def round_measure(setup: Setup, plan: Plan, captures: Sequence[Capture], calibration: Calibration | None) -> float:
+    """The measure of a round (:data:`MEASURES`, by ``[lightset] kind``; lower is better):
+
+    - no light set: the mean over the captures of the problem's objective on the recorded images;
+    - photometric_stereo: the mean over the object's pixels of the angle (deg) between the normal
+      photometric stereo recovers from the recorded images and the model's (G-buffer) normal, 90°
+      where it recovers none (fewer than three usable lights): the images linearised by the
+      ``calibration``'s response γ, its ambient image subtracted, its light power as the lights'
+      strength, the lights where the robot put them (directions from the object's centre, the
+      directional model; :func:`~optlight.photometric_stereo.recover_from_scene`);
+    - rti: the covering radius (deg) of the captured lights on the allowed cap (every point of the
+      cap within it of a light; :func:`~optlight.planning.lightsets.coverage`);
+    - grid: the largest angle (deg) between a grid direction and the light captured for it (the
+      plan's grid report: the captures are at the plan's lights)."""
+    spec = setup.problem.lightset
+    if spec.kind == "none":
+        return float(np.mean(measured_costs(setup, captures)))
+    if spec.kind == "grid":
+        return float((plan.lightset or {}).get("grid", {}).get("max_moved_deg", 0.0))
+    sphere = setup.sphere
+    d = np.array([c.light_position for c in captures]) - sphere.center
+    directions = (d / np.linalg.norm(d, axis=1, keepdims=True)) @ sphere.rotation  # sphere frame
+    if spec.kind == "rti":
+        return coverage(directions, Cap(sphere.zenith_min, sphere.zenith_max))["covering_radius_deg"]
+    scene = (setup if calibration is None else calibrated_setup(setup, calibration)).scene
+    s = scene.light.saturation
+    linear = np.stack([linearise(c.image, s, scene.response_gamma) for c in captures])
+    recovery = recover_from_scene(scene, directions, linear, spec.dark_level, spec.saturation_level)
+    error = recovery.angular_error(gbuffer_normal_map(setup.scene))[scene.gbuffer.mask]
+    return float(np.mean(np.where(np.isnan(error), 90.0, error)))
+
+
 def improves(cost: float, kept: float, tolerance: float) -> bool:
     """A measured ``cost`` is an improvement on the ``kept`` one when it is at least ``tolerance``
     (relative) below it: the loop's stop rule and its choice of plan. A smaller decrease is within
@@ -206,8 +254,9 @@ def improves(cost: float, kept: float, tolerance: float) -> bool:
 class Iteration:
     """One round of the loop: the ``plan`` (made on the model of the previous round's calibration,
     the problem's model for round 0), its ``captures``, the ``measured`` and ``modelled`` cost of each
-    capture, the ``calibration`` fitted after it (None when it failed: ``calibration_error`` says why)
-    and the round's ``wall_time_s`` (plan, capture and calibration)."""
+    capture, the ``calibration`` fitted after it (None when it failed: ``calibration_error`` says why),
+    the round's ``wall_time_s`` (plan, capture and calibration) and its ``measure``
+    (:func:`round_measure`; None: the measured cost)."""
 
     index: int
     plan: Plan
@@ -217,6 +266,12 @@ class Iteration:
     calibration: Calibration | None
     wall_time_s: float
     calibration_error: str | None = None
+    measure: float | None = None
+
+    @property
+    def score(self) -> float:
+        """What the loop judges the round by: its ``measure`` (the measured cost when None)."""
+        return self.measured_cost if self.measure is None else self.measure
 
     @property
     def measured_cost(self) -> float:
@@ -236,6 +291,7 @@ class Iteration:
             "iteration": self.index,
             "measured_cost": self.measured_cost,
             "modelled_cost": self.modelled_cost,
+            "measure": self.score,
             "measured_per_capture": self.measured,
             "modelled_per_capture": self.modelled,
             "landmarks": [
@@ -268,15 +324,21 @@ class Acquisition:
     exposure: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def measure(self) -> str:
+        """The name of what the loop judges rounds by (:data:`MEASURES`)."""
+        return MEASURES[self.setup.problem.lightset.kind]
+
+    @property
     def best(self) -> Iteration:
-        """The round the loop keeps: the first, replaced by a later one only when its measured cost is
-        at least ``[loop] tolerance`` (relative) below the kept round's — the rule that stops the loop.
+        """The round the loop keeps: the first, replaced by a later one only when its measure
+        (:attr:`Iteration.score`) is at least ``[loop] tolerance`` (relative) below the kept round's —
+        the rule that stops the loop.
         A smaller decrease is within what the camera's noise makes: keeping such a round was measured
         worse than the open loop when captured again (bench_loop's light_2cm_off, ratio 1.00006)."""
         tolerance = self.setup.problem.loop.tolerance
         kept = self.iterations[0]
         for it in self.iterations[1:]:
-            if improves(it.measured_cost, kept.measured_cost, tolerance):
+            if improves(it.score, kept.score, tolerance):
                 kept = it
         return kept
 
@@ -303,6 +365,10 @@ class Acquisition:
         best, first = self.best, self.open_loop
         return {
             **head,
+            "measure": self.measure,
+            "open_loop_measure": first.score,
+            "best_measure": best.score,
+            "ratio_best_over_open_loop_measure": best.score / first.score if first.score > 0 else None,
             "best_iteration": best.index,
             "open_loop_measured_cost": first.measured_cost,
             "best_measured_cost": best.measured_cost,
@@ -355,7 +421,7 @@ class Acquisition:
         lines = [
             f"# {self.setup.problem.name}: camera in the loop ({self.camera} camera)",
             "",
-            f"Status: {self.status}. The best round (lowest measured cost): {best}.",
+            f"Status: {self.status}. The best round (lowest {self.measure}): {best}.",
             "",
             "## Files",
             "",
@@ -586,12 +652,21 @@ def acquire(
         except OptlightError as e:
             error = str(e)
         notify(i, "calibrate", 1, 1)
+        measure = None if setup.problem.lightset.kind == "none" else round_measure(setup, plan, captures, calibration)
         rounds.append(
             Iteration(
-                i, plan, tuple(captures), measured, modelled, calibration, time.perf_counter() - start, error
+                i,
+                plan,
+                tuple(captures),
+                measured,
+                modelled,
+                calibration,
+                time.perf_counter() - start,
+                error,
+                measure,
             )
         )
-        cost = float(np.mean(measured))
+        cost = rounds[-1].score
         if i > 0 and not improves(cost, best, spec.tolerance):
             status = "stopped improving"
             break

@@ -198,9 +198,10 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             acquisition = acquire(setup, rounds or args.camera, progress=progress)
     interrupts.check()
     for it in acquisition.iterations:
+        measure = "" if it.measure is None else f", {acquisition.measure} {it.measure:.4g}"
         console.print(
-            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
-            f"{it.wall_time_s:.1f} s"
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}"
+            f"{measure}, {it.wall_time_s:.1f} s"
         )
     calibration = acquisition.calibration
     if calibration is not None:
@@ -211,8 +212,8 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     if acquisition.iterations:
         best = acquisition.best
         console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
-            f"{escape(acquisition.status)}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
-            f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
+            f"{escape(acquisition.status)}; best by the {acquisition.measure}: iteration {best.index}, "
+            f"{best.score:.4g} ({best.score / max(acquisition.open_loop.score, 1e-300):.2f} × the open loop's)"
         )
     with console.status(f"writing {out}/"):
         acquisition.save(out, overwrite=args.force)

@@ -20,7 +20,14 @@ from PIL import Image
 
 import optlight
 from optlight import cli
-from optlight.acquisition import Acquisition, acquire, execute, photometric_servo, servo_functions
+from optlight.acquisition import (
+    Acquisition,
+    acquire,
+    execute,
+    photometric_servo,
+    round_measure,
+    servo_functions,
+)
 from optlight.capture import ModelCamera, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera
@@ -292,6 +299,44 @@ def test_a_later_round_is_kept_only_when_it_improves_by_the_tolerance(
         for i, c in enumerate(costs)
     )
     assert dataclasses.replace(mismatched, iterations=rounds).best.index == kept
+
+
+def test_a_round_of_a_light_set_is_judged_by_the_sets_own_measure(mismatched: Acquisition) -> None:
+    """A light set's rounds are kept by their measure, not by the histogram objective the set's
+    design ignores: the round with the lower measured cost but the higher measure is not kept."""
+    template = mismatched.iterations[0]
+    rounds = tuple(
+        dataclasses.replace(template, index=i, measured=np.full(len(template.measured), c), measure=m)
+        for i, (c, m) in enumerate([(1.0, 10.0), (0.5, 11.0), (0.9, 9.0)])
+    )
+    assert dataclasses.replace(mismatched, iterations=rounds).best.index == 2
+    assert mismatched.measure == "measured cost" and mismatched.summary()["measure"] == "measured cost"
+
+
+def test_photometric_stereo_rounds_are_measured_by_the_normal_error_of_their_images() -> None:
+    """A photometric-stereo set in a world with another response and ambient: the normals recovered
+    from the captured images with the calibrated model are as good as the plan's own model capture
+    (rendered by the model at the set's lights, recovered with the model: 90° where none is), and
+    much better than with the uncalibrated model."""
+    problem = reduced_problem(
+        "photometric_stereo",
+        camera_px=48,
+        lightset={"count": 5, "starts": 2},
+        world={"gamma": 2.2, "ambient": 0.15},
+        loop={"iterations": 1},
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        acquisition = acquire(problem, "model")
+    assert acquisition.measure == "photometric-stereo normal error (deg)"
+    assert acquisition.summary()["measure"] == acquisition.measure
+    first = acquisition.open_loop
+    stats = first.plan.model_capture().stats
+    recovered = stats["recovered_pct"] / 100
+    expected = recovered * stats["mean_deg"] + (1 - recovered) * 90.0
+    assert first.measure == pytest.approx(expected, rel=0.05)
+    uncalibrated = round_measure(acquisition.setup, first.plan, first.captures, None)
+    assert uncalibrated > 2 * first.measure
 
 
 # --------------------------------------------------------------------------------------------
