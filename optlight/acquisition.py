@@ -61,7 +61,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.capture import Capture, CaptureCamera, ModelCamera, linearise, write_capture_png
+from optlight.capture import Capture, CaptureCamera, ModelCamera, write_capture_png
 from optlight.capture.calibration import Calibration, calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera, MissingCaptureError, read_captures_csv
 from optlight.errors import OptlightError, UsageError, VerificationError
@@ -236,9 +236,8 @@ def round_measure(setup: Setup, plan: Plan, captures: Sequence[Capture], calibra
     if spec.kind == "rti":
         return coverage(directions, Cap(sphere.zenith_min, sphere.zenith_max))["covering_radius_deg"]
     scene = (setup if calibration is None else calibrated_setup(setup, calibration)).scene
-    s = scene.light.saturation
-    linear = np.stack([linearise(c.image, s, scene.response_gamma) for c in captures])
-    recovery = recover_from_scene(scene, directions, linear, spec.dark_level, spec.saturation_level)
+    images = np.stack([c.image for c in captures])  # linearised by the calibrated response
+    recovery = recover_from_scene(scene, directions, images, spec.dark_level, spec.saturation_level)
     error = recovery.angular_error(gbuffer_normal_map(setup.scene))[scene.gbuffer.mask]
     return float(np.mean(np.where(np.isnan(error), 90.0, error)))
 
