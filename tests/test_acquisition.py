@@ -28,7 +28,7 @@ from optlight.acquisition import (
     round_measure,
     servo_functions,
 )
-from optlight.capture import ModelCamera, write_capture_png
+from optlight.capture import Capture, ModelCamera, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera
 from optlight.errors import OptlightError
@@ -311,6 +311,25 @@ def test_a_round_of_a_light_set_is_judged_by_the_sets_own_measure(mismatched: Ac
     )
     assert dataclasses.replace(mismatched, iterations=rounds).best.index == 2
     assert mismatched.measure == "measured cost" and mismatched.summary()["measure"] == "measured cost"
+
+
+def test_rti_and_grid_rounds_are_measured_by_coverage_and_by_the_grid_error(mismatched: Acquisition) -> None:
+    """RTI: one light at the pole of a 0–40° cap leaves the rim 40° away, a ring of lights at 20°
+    leaves less; a grid: the plan's largest move from a grid direction."""
+    setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32))
+    sphere = setup.sphere
+    assert setup.problem.lightset.kind == "rti" and np.rad2deg(sphere.zenith_max) == pytest.approx(40.0)
+
+    def captures(angles_deg):
+        return [Capture(np.zeros((32, 32)), sphere.position(*np.deg2rad(a))) for a in angles_deg]
+
+    pole = round_measure(setup, None, captures([(0.0, 0.0)]), None)
+    assert pole == pytest.approx(40.0, abs=0.5)
+    ring = round_measure(setup, None, captures([(0.0, 0.0), *((30.0, a) for a in range(0, 360, 60))]), None)
+    assert ring < 0.5 * pole
+    grid = dataclasses.replace(setup, problem=reduced_problem("yale_grid", camera_px=32))
+    plan = dataclasses.replace(mismatched.open_loop.plan, lightset={"grid": {"max_moved_deg": 3.5}})
+    assert round_measure(grid, plan, [], None) == 3.5
 
 
 def test_photometric_stereo_rounds_are_measured_by_the_normal_error_of_their_images() -> None:
