@@ -291,11 +291,10 @@ class LandmarksSpec:
     )
     sweep_step_deg: float = key(
         2.0,
-        "zenith step of the coarse sweep that seeds the refinement",
+        "zenith step of the coarse sweep that seeds the refinement (a finer sweep only multiplies the renders)",
         unit="deg",
-        lo=0.0,
+        lo=0.1,
         hi=45.0,
-        lo_open=True,
     )
     seeds: int = key(3, "sweep minima refined by IPOPT per azimuth", lo=1, hi=50)
     resolution: int = key(
@@ -323,7 +322,11 @@ class TrajectorySpec:
     )
     path: Literal["arc", "free"] = key("arc", "keep the light on great-circle arcs, or only on the sphere")
     knot_spacing_deg: float = key(
-        2.0, "largest angle between two path knots", unit="deg", lo=0.0, hi=30.0, lo_open=True
+        2.0,
+        "largest angle between two path knots (finer knots only multiply the trajectory NLP's variables)",
+        unit="deg",
+        lo=0.1,
+        hi=30.0,
     )
     max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
     dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
@@ -550,11 +553,11 @@ class LightSetSpec:
     )
     candidate_spacing_deg: float = key(
         2.0,
-        "spacing of the candidate lights a grid direction may be replaced by",
+        "spacing of the candidate lights a grid direction may be replaced by (their count grows as its "
+        "inverse square)",
         unit="deg",
-        lo=0.0,
+        lo=0.5,
         hi=30.0,
-        lo_open=True,
     )
 
 

@@ -96,6 +96,9 @@ PROBLEMS: dict[str, dict] = {
     "ik_iterations": small(robot=FAR_BASE, solver={"ik_max_iter": 1_000_000_000}),
     "solver_iterations": small(solver={"max_iter": 1_000_000_000}),
     "velocity": small(robot={"velocity_scale": 1e-12}),
+    "sweep": small(landmarks={"sweep_step_deg": 1e-6}),
+    "knots": small(trajectory={"knot_spacing_deg": 1e-6}),
+    "candidates": small(lightset={"kind": "grid", "candidate_spacing_deg": 0.01}),
     "rate": small(trajectory={"rate_hz": 1e9}),
     "evil_pattern": small(trajectory={"image_pattern": "../../evil_{index}.png"}),
     "absolute_pattern": small(trajectory={"image_pattern": "/tmp/evil_{index}.png"}),
@@ -154,6 +157,24 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
         ["batch", "{million}", "--out", "out_batch"],
         r"{million}: grid: expected at most 10000 rows, .* got 1000000$",
         ["out_batch"],
+    ),
+    (
+        "a sweep step of a micro-degree",
+        ["check", "{sweep}"],
+        r"{sweep}: landmarks\.sweep_step_deg: expected a value ≥ 0\.1 deg, got 1e-06$",
+        [],
+    ),
+    (
+        "knots a micro-degree apart",
+        ["check", "{knots}"],
+        r"{knots}: trajectory\.knot_spacing_deg: expected a value ≥ 0\.1 deg, got 1e-06$",
+        [],
+    ),
+    (
+        "grid candidates a hundredth of a degree apart",
+        ["check", "{candidates}"],
+        r"{candidates}: lightset\.candidate_spacing_deg: expected a value ≥ 0\.5 deg, got 0\.01$",
+        [],
     ),
     # huge allocations
     (
