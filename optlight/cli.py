@@ -30,13 +30,16 @@ import numpy as np
 
 from optlight import interrupts
 from optlight.errors import OptlightError, UsageError, VerificationError
-from optlight.spec import available_problems, load_problem, resolve_problem_path
+from optlight.spec import Problem, available_problems, load_problem, resolve_problem_path
 from optlight.threads import WORKERS_PER_CORE, max_local_workers
 
 #: What ``--force`` allows, as the output policy's errors say it.
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
+#: Most cells of an ``optlight reach`` grid: one generalized IK solve (and a clear-posture search)
+#: each, a few milliseconds to a second when the cell is out of reach.
+MAX_REACH_CELLS = 20_000
 #: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
 #: import can break a library for the rest of the run (trimesh catches it while importing an optional
 #: part and leaves an error wrapper where a class should be).
@@ -232,6 +235,7 @@ def _cmd_reach(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
+    _check_reach_grid(problem, args.zenith_step, args.azimuth_step)
     setup = preflight(problem)
     result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     interrupts.check()
@@ -243,6 +247,24 @@ def _cmd_reach(args: argparse.Namespace) -> int:
         print(f"{100 * result.taken_fraction:.1f}% of it taken by the environment (collision or view)")
     print(f"wrote {png} and {js}")
     return 0
+
+
+def _check_reach_grid(problem: Problem, zenith_step: float, azimuth_step: float) -> None:
+    """Refuse a reachability grid of more than :data:`MAX_REACH_CELLS` cells (as
+    :func:`optlight.planning.reach.reachability_map` lays it over the cap), naming the smallest zenith
+    step that fits with this azimuth step."""
+    span = problem.light_sphere.zenith_max_deg - problem.light_sphere.zenith_min_deg
+    n_z = math.ceil(span / zenith_step - 1e-9) + 1
+    n_a = math.ceil(360.0 / azimuth_step - 1e-9)
+    if n_z * n_a <= MAX_REACH_CELLS:
+        return
+    rows = MAX_REACH_CELLS // n_a
+    fits = f"--zenith-step ≥ {span / (rows - 1):.3g} with this azimuth step" if rows >= 2 else "a larger --azimuth-step"
+    raise UsageError(
+        "--zenith-step",
+        f"a grid of at most {MAX_REACH_CELLS} cells (an IK solve each): {n_z} zenith × {n_a} azimuth cells "
+        f"over the cap's {span:g}° = {n_z * n_a}; give {fits}",
+    )
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:

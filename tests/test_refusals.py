@@ -153,6 +153,13 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
         ["out_workers"],
     ),
     (
+        "a reachability grid of millions of cells",
+        ["reach", "{small}", "--zenith-step", "0.1", "--azimuth-step", "0.1", "--out", "out_reach"],
+        r"--zenith-step: a grid of at most 20000 cells \(an IK solve each\): 601 zenith × 3600 azimuth cells "
+        r".*--zenith-step ≥ 15 with this azimuth step$",
+        ["out_reach"],
+    ),
+    (
         "a batch grid of a million rows",
         ["batch", "{million}", "--out", "out_batch"],
         r"{million}: grid: expected at most 10000 rows, .* got 1000000$",
