@@ -19,7 +19,8 @@ written over files optlight did not write. The output policy (:func:`check_outpu
 - anything else that exists (a file, a folder holding files optlight did not write, a broken link)
   is refused with a one-line :class:`UsageError`, before any work when the caller checks first;
 - a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
-  existing file is replaced only with ``overwrite``, a folder never.
+  existing file is replaced only with ``overwrite`` and only when it is one optlight wrote (a PNG
+  with optlight's mark, :func:`optlight.viz.images.written_by_optlight`), a folder never.
 
 The final renames run with Ctrl-C deferred (:func:`optlight.interrupts.deferred`), so an output
 appears whole or not at all; until then an interrupt removes the staging folder or temporary file.
@@ -494,16 +495,26 @@ def write_folder(
 
 
 def check_output_file(
-    path: str | Path, *, overwrite: bool = False, option: str = "file", force: str = "overwrite=True"
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    option: str = "file",
+    force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
-    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`."""
+    and then only when ``ours(path)`` says optlight wrote it (when given), never a folder; the nearest
+    existing folder above it must be writable. Raises :class:`UsageError`."""
     out = Path(path)
     if out.is_dir():
         raise UsageError(option, f"{out} is a folder; give the path of the file to write")
     exists = out.exists() or out.is_symlink()
     if exists and not overwrite:
         raise UsageError(option, f"{out} exists; pass {force} to replace it")
+    if exists and ours is not None and (out.is_symlink() or not ours(out)):
+        raise UsageError(
+            option, f"{out} exists and optlight did not write it; {force} replaces only a file optlight wrote"
+        )
     anchor = _existing_ancestor(out, option)
     _probe(anchor, option)
     return OutputTarget(out, anchor, exists=exists)
@@ -516,10 +527,12 @@ def write_file(
     overwrite: bool = False,
     option: str = "file",
     force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> Path:
     """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
-    rename it to ``path`` (missing folders above it created then), following the output policy."""
-    target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+    rename it to ``path`` (missing folders above it created then), following the output policy
+    (``ours``: see :func:`check_output_file`)."""
+    target = check_output_file(path, overwrite=overwrite, option=option, force=force, ours=ours)
     out = target.path
     temporary = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}{out.suffix}"
     try:
