@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.capture import linearise
 from optlight.errors import OptlightError, ProblemError
+from optlight.scene.response import linearise
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

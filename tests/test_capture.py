@@ -16,13 +16,14 @@ import pytest
 from PIL import Image
 from scipy.ndimage import binary_erosion
 
-from optlight.capture import ModelCamera, calibration, linearise, respond, write_capture_png
+from optlight.capture import ModelCamera, calibration, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera, MissingCaptureError
 from optlight.capture.mitsuba import MitsubaCamera
 from optlight.errors import ProblemError
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff, lambertian
+from optlight.scene.response import linearise, respond
 from optlight.setup import Setup
 from optlight.spec import LightSpec, LoopSpec, WorldSpec, problem_from_dict
 

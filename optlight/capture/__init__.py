@@ -90,18 +90,6 @@ def world_light(light: LightSpec, world: WorldSpec) -> LightSpec:
     )
 
 
-def respond(linear: ArrayLike, saturation: float, gamma: float) -> Array:
-    """The camera response Y = s·(clip(I, 0, s)/s)^(1/γ) of linear values I."""
-    u = np.clip(np.asarray(linear, float) / saturation, 0.0, 1.0)
-    return saturation * u ** (1.0 / gamma)
-
-
-def linearise(recorded: ArrayLike, saturation: float, gamma: float) -> Array:
-    """The inverse of :func:`respond`: I = s·(Y/s)^γ, for Y in [0, s]."""
-    u = np.clip(np.asarray(recorded, float) / saturation, 0.0, 1.0)
-    return saturation * u**gamma
-
-
 class ModelCamera:
     """The model camera: the scene's NumPy renderer (shadow rays) in the world of ``world`` (see the
     module docstring) as far as the Lambertian model goes; BSDF, inter-reflection and the light's size

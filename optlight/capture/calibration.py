@@ -51,12 +51,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-from optlight.capture import Array, Capture, linearise, respond
+from optlight.capture import Array, Capture
 from optlight.errors import OptlightError
 from optlight.objectives import Objective
 from optlight.photometric_stereo import recover_normals
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff
+from optlight.scene.response import linearise, respond
 from optlight.setup import Setup
 from optlight.spec import LightSpec, LoopSpec
 

@@ -24,10 +24,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from PIL import Image, UnidentifiedImageError
 
-from optlight.capture import Capture, linearise
+from optlight.capture import Capture
 from optlight.errors import OptlightError, ProblemError
 from optlight.objectives import read_image
 from optlight.scene import Camera
+from optlight.scene.response import linearise
 
 #: The columns of captures.csv the folder camera reads.
 POSITION_COLUMNS = ("light_position_x_m", "light_position_y_m", "light_position_z_m")

@@ -36,9 +36,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optlight.capture import Array, Capture, respond, world_albedo, world_light
+from optlight.capture import Array, Capture, world_albedo, world_light
 from optlight.errors import OptlightError, ProblemError
 from optlight.scene import Scene
+from optlight.scene.response import respond
 from optlight.spec import WorldSpec
 
 #: Where Debian's ``libllvm19`` installs libLLVM (``dpkg -L libllvm19``).
