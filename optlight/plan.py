@@ -23,6 +23,7 @@ from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
@@ -45,7 +46,8 @@ class Plan:
     ``setup`` the built problem; ``landmarks`` the landmark search; ``visited`` the landmarks kept,
     in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
     ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
-    knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
+    knots; ``trajectory`` the timed motion; ``waypoints`` its points for a controller that interpolates
+    quintically (joint_trajectory.yaml); ``verification`` the independent check; ``timings``
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
     None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
@@ -61,6 +63,7 @@ class Plan:
     knot_ik: Array
     nlp: TrajectoryNLPResult
     trajectory: Trajectory
+    waypoints: Waypoints
     verification: VerificationReport
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
@@ -117,6 +120,7 @@ class Plan:
             "knot_ik_path_length_rad": joint_path_length(self.knot_ik),
             "duration_s": self.trajectory.duration,
             "motion_time_s": self.motion_time,
+            "controller_waypoints": len(self.waypoints),
             "verification_passed": self.verification.passed,
             "min_clearance_m": {
                 name: -check.max_value
@@ -176,6 +180,7 @@ class Plan:
             path=self.path,
             nlp=self.nlp,
             trajectory=self.trajectory,
+            waypoints=self.waypoints,
             verification=self.verification,
             summary=summary,
             timings=self.timings,

@@ -6,7 +6,9 @@ their joint angles, the path, the trajectory NLP, the timed trajectory, the veri
 at once or not at all (:func:`optlight.export.write_results`):
 
 - ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
-  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
+  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory: the controller waypoints),
+  ``follow_joint_trajectory_goal.yaml`` (the same as a FollowJointTrajectory goal), ``captures.csv``
+  (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers);
@@ -32,6 +34,7 @@ from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.verify import VerificationReport
@@ -160,6 +163,7 @@ def report_markdown(
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
+        f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
@@ -282,6 +286,7 @@ def save_results(
     path: LightPath,
     nlp: TrajectoryNLPResult,
     trajectory: Trajectory,
+    waypoints: Waypoints,
     verification: VerificationReport,
     summary: Mapping[str, Any],
     timings: Mapping[str, float],
@@ -327,8 +332,7 @@ def save_results(
     traj_spec = setup.trajectory_spec
 
     def joint_trajectory(folder: Path) -> list[Path]:
-        out = folder / "joint_trajectory.yaml"
-        return [write_joint_trajectory(out, trajectory, robot.joint_names, traj_spec.rate_hz)]
+        return write_joint_trajectory(folder, waypoints, robot.joint_names)
 
     def captures(folder: Path) -> list[Path]:
         return [

@@ -325,8 +325,8 @@ class TrajectorySpec:
     )
     rate_hz: float = key(
         1000.0,
-        "controller rate: trajectory.csv and joint_trajectory.yaml are sampled at it, the acceleration "
-        "continuity is checked at it",
+        "controller rate: trajectory.csv is sampled at it (joint_trajectory.yaml holds the waypoints "
+        "chosen on its grid), the acceleration continuity is checked at it",
         unit="Hz",
         lo=0.0,
         lo_open=True,

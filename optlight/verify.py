@@ -20,6 +20,11 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``acceleration_continuity``: on the controller's grid t_k = k / rate_hz, the largest jump
   |q̈_j(t_{k+1}) − q̈_j(t_k)| relative to what the jerk limit allows in one step, j_max,j / rate_hz
   (a step of q̈, as TOPPRA's parametrization has, shows as a ratio far above 1);
+- with controller waypoints (the points of joint_trajectory.yaml): ``interpolation``: at every sample,
+  |q̂_j(t) − q_j(t)| ≤ interpolation_rad, q̂ the quintic Hermite interpolation of the waypoints
+  (the polynomial of degree 5 per interval with the waypoints' q, q̇, q̈ at both ends, as ROS 2's
+  joint_trajectory_controller interpolates them), evaluated here by its own basis functions
+  (:func:`quintic_hermite`);
 - with a view check (:class:`optlight.environment.view.ViewCheck`, exact ray casting at the captures):
   ``view`` (camera rays to the object blocked by a robot link or the light housing) and ``beam``
   (light rays to the object blocked by a robot link), each the largest blocked fraction of a
@@ -63,6 +68,10 @@ EnvironmentCheck = Callable[[np.ndarray, np.ndarray, np.ndarray], Any]
 #: with ``view_blocked``, ``view_body``, ``view_bodies``, ``beam_*``, ``capture``, ``time_s``).
 ViewCheck = Callable[[np.ndarray, np.ndarray], Any]
 
+#: Points a controller interpolates quintically (duck-typed, as
+#: :class:`optlight.planning.waypoints.Waypoints`): ``t`` (K,) s, ``q``, ``qd``, ``qdd`` (K, n).
+ControllerPoints = Any
+
 #: Check names of the environment pair kinds.
 ENVIRONMENT_CHECKS = {"obstacle": "clearance", "self": "self_collision", "view": "view_cone"}
 
@@ -82,6 +91,7 @@ class Tolerances:
     aim_rad: float = 1e-4
     landmark_m: float = 1e-6
     path_m: float = 5e-3
+    interpolation_rad: float = 1e-4
 
 
 @dataclass(frozen=True)
@@ -216,6 +226,7 @@ def verify_trajectory(
     environment: EnvironmentCheck | None = None,
     jerk_limit: ArrayLike | None = None,
     view: ViewCheck | None = None,
+    waypoints: ControllerPoints | None = None,
     advisory: tuple[str, ...] = (),
     rate_hz: float = 1000.0,
     tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
@@ -238,6 +249,8 @@ def verify_trajectory(
         jerk_limit: (n,) positive jerk limits (rad/s³), or None to skip the jerk and acceleration
             continuity checks (a TOPPRA-timed trajectory has no bounded jerk).
         view: exact view and beam check at the captures, or None to skip it.
+        waypoints: the points a controller interpolates quintically (``t``, ``q``, ``qd``, ``qdd``),
+            or None to skip the ``interpolation`` check.
         advisory: names of checks reported without deciding the verdict.
         rate_hz: resampling rate, at least 1000 Hz; also the controller grid of the continuity check.
         tol: the tolerances.
@@ -382,6 +395,22 @@ def verify_trajectory(
             in_transfer,
             lambda k, v: f"light {v * 1e3:.3g} mm inside the sphere at t = {t[k]:.4f} s (> {tol.path_m * 1e3:.3g} mm)",
         )
+    if waypoints is not None:
+        interpolated = quintic_hermite(waypoints.t, waypoints.q, waypoints.qd, waypoints.qdd, t)
+        gap = np.abs(interpolated - q)
+        collector.joint_check(
+            "interpolation",
+            "largest |q̂_j − q_j|, q̂ the quintic interpolation of the controller waypoints",
+            "rad",
+            gap,
+            np.full(n, tol.interpolation_rad),
+            lambda j, k: (
+                f"joint {names[j]}: the waypoints' quintic interpolation is {gap[k, j]:.3g} rad from the plan "
+                f"at t = {t[k]:.4f} s (> {tol.interpolation_rad:.3g} rad)"
+            ),
+        )
+    else:
+        skipped += ("interpolation",)
     if environment is not None:
         _environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
     if view is not None:
@@ -495,6 +524,38 @@ def _environment_checks(collector: _Collector, report: Any, samples: int) -> Non
             for v in report.violations
             if v.kind == kind
         )
+
+
+def quintic_hermite(t_points: ArrayLike, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, t: ArrayLike) -> Array:
+    """Positions (T, n) at times t (T,) of the quintic Hermite interpolation of points
+    (t_k, q_k, q̇_k, q̈_k) (K,) and (K, n) each: on [t_k, t_{k+1}], h = t_{k+1} − t_k, x = (t − t_k)/h,
+
+        q̂ = H₀ q_k + H₁ h q̇_k + H₂ h² q̈_k + H₃ q_{k+1} + H₄ h q̇_{k+1} + H₅ h² q̈_{k+1},
+        H₀ = 1 − 10x³ + 15x⁴ − 6x⁵,  H₁ = x − 6x³ + 8x⁴ − 3x⁵,  H₂ = (x² − 3x³ + 3x⁴ − x⁵)/2,
+        H₃ = 10x³ − 15x⁴ + 6x⁵,      H₄ = −4x³ + 7x⁴ − 3x⁵,     H₅ = (x³ − 2x⁴ + x⁵)/2,
+
+    the basis whose values and first two derivatives at x = 0 and 1 pick out one of the six end
+    values each. NaN outside [t_0, t_K] (a time the points do not cover)."""
+    tp = np.asarray(t_points, float)
+    q, qd, qdd = (np.asarray(a, float) for a in (q, qd, qdd))
+    times = np.asarray(t, float)
+    k = np.clip(np.searchsorted(tp, times, side="right") - 1, 0, tp.size - 2)
+    h = (tp[k + 1] - tp[k])[:, None]
+    x = (times - tp[k])[:, None] / h
+    x2, x3 = x * x, x * x * x
+    x4, x5 = x3 * x, x3 * x2
+    basis = (
+        1 - 10 * x3 + 15 * x4 - 6 * x5,
+        x - 6 * x3 + 8 * x4 - 3 * x5,
+        0.5 * (x2 - 3 * x3 + 3 * x4 - x5),
+        10 * x3 - 15 * x4 + 6 * x5,
+        -4 * x3 + 7 * x4 - 3 * x5,
+        0.5 * (x3 - 2 * x4 + x5),
+    )
+    ends = (q[k], h * qd[k], h**2 * qdd[k], q[k + 1], h * qd[k + 1], h**2 * qdd[k + 1])
+    out = sum(b * e for b, e in zip(basis, ends, strict=True))
+    outside = (times < tp[0] - 1e-9) | (times > tp[-1] + 1e-9)
+    return np.where(outside[:, None], np.nan, out)
 
 
 def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
