@@ -459,8 +459,9 @@ def verify_knots(
     and acceleration continuity when jerk-limited), h and aim at the captures ``positions`` (M, 3)
     (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
     where the light must stay outside the sphere, the environment by exact coal distances, the
-    camera's view and the beam by exact ray casting at the captures, and the quintic interpolation of
-    the controller ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
+    camera's view and the beam by exact ray casting at the captures, the joint torques (the lamp
+    included) against the robot's torque limits, and the quintic interpolation of the controller
+    ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
         trajectory,
@@ -485,5 +486,6 @@ def verify_knots(
             else None
         ),
         waypoints=waypoints,
+        dynamics=setup.dynamics,
         rate_hz=max(1000.0, spec.rate_hz),
     )

@@ -121,6 +121,7 @@ class Plan:
             "duration_s": self.trajectory.duration,
             "motion_time_s": self.motion_time,
             "controller_waypoints": len(self.waypoints),
+            "torque_peak_fraction": _torque_fractions(self.verification),
             "verification_passed": self.verification.passed,
             "min_clearance_m": {
                 name: -check.max_value
@@ -211,3 +212,12 @@ class Plan:
 def joint_path_length(theta: Array) -> float:
     """Σ_k |θ_{k+1} − θ_k| (rad) of a (K, n) knot sequence."""
     return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))
+
+
+def _torque_fractions(report: VerificationReport) -> dict[str, float] | None:
+    """Per joint, its peak |τ| along the plan as a fraction of its torque limit; None for a robot
+    without published limits or a report without torques."""
+    torques = report.torques
+    if torques is None or torques.fraction is None:
+        return None
+    return dict(zip(torques.joints, torques.fraction, strict=True))

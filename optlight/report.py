@@ -164,6 +164,7 @@ def report_markdown(
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
         f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
+        f"| peak joint torque / limit (the lamp {setup.problem.light.mass_kg:g} kg) | {_torque_text(verification)} |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
@@ -186,6 +187,17 @@ def report_markdown(
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
+
+
+def _torque_text(verification: VerificationReport) -> str:
+    """The largest fraction of a torque limit a joint reaches, and which; or why none is checked."""
+    torques = verification.torques
+    if torques is None:
+        return "not computed"
+    if torques.fraction is None:
+        return f"not checked: {torques.source}"
+    j = max(range(len(torques.joints)), key=lambda i: torques.fraction[i] if torques.fraction else 0.0)
+    return f"{torques.fraction[j]:.0%} ({torques.joints[j]}; every joint under Verification)"
 
 
 def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
