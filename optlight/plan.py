@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
+from optlight.planning.jerk import rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
@@ -97,6 +98,31 @@ class Plan:
         intervals = self.trajectory.landmark_intervals
         return float(self.trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0]))
 
+    def motion_bound(self) -> dict[str, float]:
+        """The moving time against its rest-to-rest lower bound (s): the time-optimal moves between
+        the plan's postures, in its order, from the start configuration to the first capture and
+        back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
+        (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
+        paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
+        moves from and to the start."""
+        trajectory, limits = self.trajectory, self.setup.limits
+        intervals = trajectory.landmark_intervals
+        approach = bool(intervals[0, 0] > 0)
+        retreat = bool(trajectory.duration > intervals[-1, 1])
+        start = self.setup.start[None]
+        postures = np.vstack([start] * approach + [self.landmark_thetas] + [start] * retreat)
+        moves = rest_to_rest_moves(postures, limits.velocity, limits.acceleration, limits.jerk)
+        inner = moves[int(approach) : moves.size - int(retreat)]
+        segments = trajectory.segment_times
+        bound = float(moves.sum())
+        return {
+            "motion_time_s": self.motion_time,
+            "rest_to_rest_s": bound,
+            "ratio": self.motion_time / bound if bound > 0 else 1.0,
+            "between_captures_s": float(np.sum(segments[:, 1] - segments[:, 0])),
+            "between_captures_rest_to_rest_s": float(inner.sum()),
+        }
+
     @property
     def light_directions_camera(self) -> Array:
         """(M, 3) unit vectors from the object to the light at each capture, OpenCV camera frame."""
@@ -122,6 +148,7 @@ class Plan:
             "motion_time_s": self.motion_time,
             "controller_waypoints": len(self.waypoints),
             "torque_peak_fraction": _torque_fractions(self.verification),
+            "motion_bound": self.motion_bound(),
             "verification_passed": self.verification.passed,
             "min_clearance_m": {
                 name: -check.max_value

@@ -161,6 +161,9 @@ def report_markdown(
         f"| joint path length (NLP / per-knot IK) | {s['joint_path_length_rad']:.3f} rad / "
         f"{s['knot_ik_path_length_rad']:.3f} rad |",
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
+        f"| moving time / rest-to-rest bound (time-optimal stops at the same postures) | "
+        f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['rest_to_rest_s']:.2f} s "
+        f"({s['motion_bound']['ratio']:.2f}×) |",
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
         f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",

@@ -218,6 +218,25 @@ def test_jerk_limited_plan_exports_for_the_controller(plan: optlight.Plan, tmp_p
     assert [line.split()[0] for line in lp] == [row.split(",")[4] for row in captures]
 
 
+def test_moving_time_is_reported_against_its_rest_to_rest_bound(plan: optlight.Plan, tmp_path: Path) -> None:
+    """The time-optimal stops at the same postures, under the same limits, bound the moving time from
+    below; plan.json and report.md give both, and the peak torques per joint against their limits."""
+    bound = plan.summary()["motion_bound"]
+    assert bound["motion_time_s"] == pytest.approx(plan.motion_time)
+    assert 1.0 <= bound["ratio"] == pytest.approx(plan.motion_time / bound["rest_to_rest_s"])
+    assert 0 < bound["between_captures_rest_to_rest_s"] <= bound["between_captures_s"]
+    assert bound["between_captures_rest_to_rest_s"] < bound["rest_to_rest_s"]  # the approach and return too
+    folder = tmp_path / "out"
+    plan.save(folder, preview=False)
+    saved = json.loads((folder / "plan.json").read_text())
+    assert saved["summary"]["motion_bound"] == pytest.approx(bound)
+    torques = saved["verification"]["torques"]
+    assert torques["joints"] == plan.robot.joint_names and len(torques["fraction"]) == plan.robot.n
+    assert saved["summary"]["torque_peak_fraction"] == dict(zip(torques["joints"], torques["fraction"], strict=True))
+    report = (folder / "report.md").read_text()
+    assert f"{bound['ratio']:.2f}×" in report and "peak joint torque / limit" in report
+
+
 def test_toppra_timing_stays_available() -> None:
     toppra = optlight.solve(small_problem(trajectory={"timing": "toppra"}, landmarks={"count": 3}))
     assert toppra.verification.passed
