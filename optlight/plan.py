@@ -100,8 +100,8 @@ class Plan:
 
     def motion_bound(self) -> dict[str, float]:
         """The moving time against its rest-to-rest lower bound (s): the time-optimal moves between
-        the plan's postures, in its order, from the start configuration to the first capture and
-        back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
+        the trajectory's postures at its captures, in its order, from the start configuration to the
+        first capture and back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
         (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
         paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
         moves from and to the start."""
@@ -109,8 +109,10 @@ class Plan:
         intervals = trajectory.landmark_intervals
         approach = bool(intervals[0, 0] > 0)
         retreat = bool(trajectory.duration > intervals[-1, 1])
-        start = self.setup.start[None]
-        postures = np.vstack([start] * approach + [self.landmark_thetas] + [start] * retreat)
+        # the trajectory's own postures: at each dwell (the trajectory NLP may move a capture's joints
+        # in the arm's null space away from its placement), at the start and at the end
+        q = trajectory.sample(np.r_[0.0, intervals[:, 0], trajectory.duration])[0]
+        postures = q[(0 if approach else 1) : q.shape[0] - (0 if retreat else 1)]
         moves = rest_to_rest_moves(postures, limits.velocity, limits.acceleration, limits.jerk)
         inner = moves[int(approach) : moves.size - int(retreat)]
         segments = trajectory.segment_times

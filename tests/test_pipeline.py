@@ -16,6 +16,7 @@ from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
 from optlight.plan import joint_path_length
+from optlight.planning.jerk import rest_to_rest_duration
 from optlight.planning.timing import Trajectory
 from optlight.verify import verify_trajectory
 
@@ -226,6 +227,13 @@ def test_moving_time_is_reported_against_its_rest_to_rest_bound(plan: optlight.P
     assert 1.0 <= bound["ratio"] == pytest.approx(plan.motion_time / bound["rest_to_rest_s"])
     assert 0 < bound["between_captures_rest_to_rest_s"] <= bound["between_captures_s"]
     assert bound["between_captures_rest_to_rest_s"] < bound["rest_to_rest_s"]  # the approach and return too
+    # every move of the plan takes at least the slowest joint's double-S time between the postures
+    # the trajectory holds at its ends (the closed form, not ruckig), and the bound sums those
+    limits, segments = plan.setup.limits, plan.trajectory.segment_times
+    start, end = (plan.trajectory.sample(segments[:, k])[0] for k in (0, 1))
+    shortest = rest_to_rest_duration(np.abs(end - start), limits.velocity, limits.acceleration, limits.jerk).max(axis=1)
+    assert np.all(segments[:, 1] - segments[:, 0] >= shortest - 1e-9)
+    assert bound["between_captures_rest_to_rest_s"] == pytest.approx(shortest.sum(), rel=1e-9)
     folder = tmp_path / "out"
     plan.save(folder, preview=False)
     saved = json.loads((folder / "plan.json").read_text())
