@@ -1,4 +1,4 @@
-"""The camera in the loop (DESIGN §11): plan, capture, calibrate, re-plan; the photometric servo; the
+"""The camera in the loop (docs/design.md §11): plan, capture, calibrate, re-plan; the photometric servo; the
 dataset folder.
 
 :func:`acquire` runs the loop::

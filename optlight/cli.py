@@ -52,7 +52,7 @@ MODULES = {
 }
 #: What ``solve`` imports once its figure worker has started: the worker's own imports (~0.8 s of a
 #: core) then overlap these and the problem's build, which leave a core idle, instead of taking
-#: one from the landmark search (0.5 → 0.9 s on the default problem when they did).
+#: one from the landmark search (which they would slow by ~80 % on the default problem).
 SOLVE_MODULES = ("optlight.preflight", "optlight.pipeline", "optlight.report", "optlight.viz.preview")
 
 

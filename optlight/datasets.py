@@ -1,4 +1,4 @@
-"""Exports for photometric-stereo tools: the DiLiGenT layout and recovered normals (DESIGN §7, §10).
+"""Exports for photometric-stereo tools: the DiLiGenT layout and recovered normals (docs/design.md §10, §12).
 
 DiLiGenT layout (one folder per object):
 

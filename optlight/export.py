@@ -1,5 +1,5 @@
 """Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml and its
-FollowJointTrajectory goal, captures.csv and figures (DESIGN §6–§7).
+FollowJointTrajectory goal, captures.csv and figures (docs/design.md §12).
 
 Nothing is written for a plan that failed verification, and no output is ever left half written or
 written over files optlight did not write. The output policy (:func:`check_output_folder`,

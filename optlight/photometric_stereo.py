@@ -1,4 +1,4 @@
-"""Photometric stereo (DESIGN §10): normals and albedo from N images under N known distant lights.
+"""Photometric stereo (docs/design.md §10): normals and albedo from N images under N known distant lights.
 
 Model (Lambertian, distant lights): pixel p under light k has the value
 

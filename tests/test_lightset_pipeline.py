@@ -1,4 +1,4 @@
-"""Light sets through the whole job (issue 12): a set designed on the allowed cap is placed, planned,
+"""Light sets through the whole job: a set designed on the allowed cap is placed, planned,
 verified and exported in the DiLiGenT layout; a grid reports the lights it had to replace."""
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def test_diligent_folder_reads_back_with_the_achieved_lights(ps_plan: Plan, ps_f
 def test_recovered_normals_match_the_model(ps_plan: Plan, ps_folder: Path) -> None:
     """The model's images are Lambertian with the ambient subtracted and shadowed or saturated lights
     rejected per pixel, so where three or more lights remain the least-squares normal is exact up to
-    the renderer's float rounding; the bound (mean 0.1°, the issue's noiseless bound) leaves room for the few pixels at a shadow's
+    the renderer's float rounding; the bound (mean 0.1°, the noiseless bound) leaves room for the few pixels at a shadow's
     edge, where a light is half in (the G-buffer normal is the pixel centre's, the image the
     pixel's). The statistics in plan.json are those of normals.npy."""
     import json

@@ -186,7 +186,7 @@ def test_the_view_check_runs_on_every_plan_and_a_blocked_capture_is_refused(
         view=view_check_for(robot, plan.scene, plan.problem.light).check,
     )
     blocked = [v for v in report.violations if v.check == "view"]
-    assert blocked, "the default layout blocks the view at some capture (issue 11)"
+    assert blocked, "the default layout blocks the view at some capture"
     first = blocked[0]
     assert first.joint in {g.name for g in robot.model.frames} | {"light housing"}
     capture = int(first.message.split()[1])
