@@ -155,6 +155,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
 
 def _summary_rows(s: dict) -> list[tuple[str, str]]:
+    bound = s["motion_bound"]
     return [
         ("robot", s["robot"]),
         ("landmarks", str(s["landmarks"])),
@@ -167,9 +168,22 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
             f"{s['joint_path_length_rad']:.3f} / {s['knot_ik_path_length_rad']:.3f} rad",
         ),
         ("duration", f"{s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving)"),
+        (
+            "moving / rest-to-rest bound",
+            f"{bound['motion_time_s']:.2f} / {bound['rest_to_rest_s']:.2f} s ({bound['ratio']:.2f}×)",
+        ),
+        ("peak torque / limit", _torque_cell(s["torque_peak_fraction"])),
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),
     ]
+
+
+def _torque_cell(fractions: dict[str, float] | None) -> str:
+    """The joint nearest its torque limit and how near, or that the robot publishes no limits."""
+    if not fractions:
+        return "not checked (no published limits)"
+    joint = max(fractions, key=lambda j: fractions[j])
+    return f"{fractions[joint]:.0%} ({joint})"
 
 
 def _cmd_acquire(args: argparse.Namespace) -> int:
