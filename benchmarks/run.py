@@ -461,6 +461,11 @@ def solve_rows(name: str, result: Result) -> list[Row]:
         row("time [s]", "time_s", result["success_pct"]),
         row("joint path length [rad]", "joint_path_length_rad"),
         row("motion time [s]", "motion_time_s"),
+        *(
+            [row("rest-to-rest bound [s]", "rest_to_rest_s"), row("motion time / rest-to-rest bound", "motion_bound_ratio")]
+            if "motion_bound_ratio" in ours
+            else []
+        ),
         row("max |h| [m]", "max_h_residual_m"),
         Row(label, "NLP iterations", ours["nlp_iterations"]["median"], ours["nlp_iterations"]["p98"]),
     ]

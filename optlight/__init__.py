@@ -43,9 +43,11 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import Trajectory, time_parameterize
-    from optlight.robot import IKResult, Robot, generalized_ik, load_robot
+    from optlight.planning.waypoints import Waypoints, controller_waypoints
+    from optlight.robot import Dynamics, IKResult, Lamp, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
+    from optlight.simulation import SimulationReport, simulate_folder
     from optlight.verify import VerificationReport, verify_trajectory
     from optlight.viz.drawing import FigureWorker
     from optlight.viz.images import save_gray_png
@@ -74,6 +76,12 @@ _LAZY = {
     "reachability_map": "optlight.planning.reach",
     "Trajectory": "optlight.planning.timing",
     "time_parameterize": "optlight.planning.timing",
+    "Waypoints": "optlight.planning.waypoints",
+    "controller_waypoints": "optlight.planning.waypoints",
+    "Dynamics": "optlight.robot",
+    "Lamp": "optlight.robot",
+    "SimulationReport": "optlight.simulation",
+    "simulate_folder": "optlight.simulation",
     "VerificationReport": "optlight.verify",
     "verify_trajectory": "optlight.verify",
     "Plan": "optlight.plan",

@@ -51,6 +51,7 @@ MODULES = {
     "batch": ("optlight.batch", "rich.progress"),
     "cell": ("optlight.cell", "optlight.export", "rich.progress"),
     "solve": ("optlight.export", "optlight.viz.drawing", "rich.progress", "rich.table"),
+    "simulate": ("optlight.export", "optlight.simulation"),
 }
 #: What ``solve`` imports once its figure worker has started: the worker's own imports (~0.8 s of a
 #: core) then overlap these and the problem's build, which leave a core idle, instead of taking
@@ -158,6 +159,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
 
 def _summary_rows(s: dict) -> list[tuple[str, str]]:
+    bound = s["motion_bound"]
     return [
         ("robot", s["robot"]),
         ("landmarks", str(s["landmarks"])),
@@ -170,9 +172,22 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
             f"{s['joint_path_length_rad']:.3f} / {s['knot_ik_path_length_rad']:.3f} rad",
         ),
         ("duration", f"{s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving)"),
+        (
+            "moving / rest-to-rest bound",
+            f"{bound['motion_time_s']:.2f} / {bound['rest_to_rest_s']:.2f} s ({bound['ratio']:.2f}×)",
+        ),
+        ("peak torque / limit", _torque_cell(s["torque_peak_fraction"])),
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),
     ]
+
+
+def _torque_cell(fractions: dict[str, float] | None) -> str:
+    """The joint nearest its torque limit and how near, or that the robot publishes no limits."""
+    if not fractions:
+        return "not checked (no published limits)"
+    joint = max(fractions, key=lambda j: fractions[j])
+    return f"{fractions[joint]:.0%} ({joint})"
 
 
 def _cmd_acquire(args: argparse.Namespace) -> int:
@@ -289,6 +304,25 @@ def _cmd_cell(args: argparse.Namespace) -> int:
     result = design_cell(args.spec, args.out, scheduler=args.scheduler, workers=args.workers, overwrite=args.force)
     for line in result.summary_lines():
         print(line)
+    return 0
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    import json
+
+    from optlight.export import check_output_file, write_file
+    from optlight.simulation import simulate_folder
+
+    if args.out is not None:
+        check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)  # before any work
+    report = simulate_folder(args.results)
+    interrupts.check()
+    for line in report.lines():
+        print(line)
+    if args.out is not None:
+        text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n"
+        out = write_file(args.out, lambda path: path.write_text(text), overwrite=args.force, option="--out", force=FORCE)
+        print(f"wrote {out}")
     return 0
 
 
@@ -444,6 +478,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help=force_help)
     _add_engine_arguments(p)
+    p = add(
+        "simulate",
+        _cmd_simulate,
+        "run a results folder's joint trajectory in MuJoCo (optlight[sim]): tracking, light at the triggers, torques",
+    )
+    p.add_argument("results", metavar="RESULTS_DIR", help="a results folder of optlight solve")
+    p.add_argument("--out", help="also write the numbers to this JSON file (not an existing one unless --force)")
+    p.add_argument("--force", action="store_true", help="replace an existing JSON file")
     add("problems", _cmd_problems, "list the built-in problems")
     p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
     p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")

@@ -1,5 +1,5 @@
-"""Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml, captures.csv
-and figures (docs/design.md §12).
+"""Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml and its
+FollowJointTrajectory goal, captures.csv and figures (docs/design.md §12).
 
 Nothing is written for a plan that failed verification, and no output is ever left half written or
 written over files optlight did not write. The output policy (:func:`check_output_folder`,
@@ -32,9 +32,14 @@ camera frame (x right, y down, z forward) that is (d_x, −d_y, −d_z): see :fu
 
 joint_trajectory.yaml is a ROS 2 ``trajectory_msgs/JointTrajectory`` (``header``, ``joint_names``,
 ``points`` with ``positions``, ``velocities``, ``accelerations``, ``effort`` and
-``time_from_start: {sec, nanosec}``), the ``trajectory`` of a ``control_msgs/FollowJointTrajectory``
-goal; with all three of positions, velocities and accelerations, joint_trajectory_controller
-interpolates quintically between the points, as :func:`read_joint_trajectory` does.
+``time_from_start: {sec, nanosec}``); with all three of positions, velocities and accelerations,
+joint_trajectory_controller interpolates quintically between the points, as
+:func:`read_joint_trajectory` does. Its points are the plan's controller waypoints
+(:mod:`optlight.planning.waypoints`: every dwell and motion boundary, plus the fewest points the
+greedy choice needs for the interpolation to stay within 1e-4 rad of the plan, which the
+verification checks), not samples at the controller rate: trajectory.csv has those.
+follow_joint_trajectory_goal.yaml is the same trajectory as a ``control_msgs/action/FollowJointTrajectory``
+goal, for ``ros2 action send_goal`` (docs/robot.md).
 
 captures.csv has one row per capture: its index, the dwell's start and end, the camera trigger (the
 dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light's zenith
@@ -71,6 +76,7 @@ from optlight import interrupts
 from optlight.errors import UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
+from optlight.planning.waypoints import Waypoints
 from optlight.spec import image_names
 from optlight.verify import VerificationReport
 
@@ -82,6 +88,11 @@ LIBRARIES = ("numpy", "scipy", "casadi", "pin", "toppra", "ruckig", "meshcat", "
 RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
 #: The file optlight writes last into every folder it fills: the files it wrote there (JSON).
 MANIFEST = ".optlight-manifest.json"
+#: The controller's files: the waypoints as a JointTrajectory, and as a FollowJointTrajectory goal.
+JOINT_TRAJECTORY = "joint_trajectory.yaml"
+FOLLOW_JOINT_TRAJECTORY_GOAL = "follow_joint_trajectory_goal.yaml"
+#: How long after the last waypoint's time the joints may take to reach it, in the goal (s).
+GOAL_TIME_TOLERANCE_S = 0.5
 #: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
 STAGING_PREFIX = ".optlight-staging-"
 #: The frame of every light direction optlight writes (captures.csv, lights.lp, light_directions.txt).
@@ -129,26 +140,24 @@ def _yaml_float(x: float) -> str:
     return text
 
 
-def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float) -> str:
-    """joint_trajectory.yaml (module docstring): the trajectory sampled at :meth:`Trajectory.sample_times`
-    (``rate_hz`` plus every dwell and motion boundary), each time rounded to the nanosecond
-    ``time_from_start`` holds before the trajectory is sampled there, so the file's points are exact."""
+def joint_trajectory_text(waypoints: Waypoints, joint_names: Sequence[str]) -> str:
+    """joint_trajectory.yaml (module docstring): the controller ``waypoints``
+    (:func:`optlight.planning.waypoints.controller_waypoints`), each with its positions, velocities,
+    accelerations and ``time_from_start`` (the nanoseconds the points were sampled at, so the file's
+    points are exact)."""
     names = list(joint_names)
-    if len(names) != trajectory.dof or len(set(names)) != len(names):
-        raise ValueError(f"{len(names)} joint names (distinct) are needed for {trajectory.dof} joints")
-    # the last time may pass the duration by < 0.5 ns, within what Trajectory.sample accepts
-    nanoseconds = np.unique(np.round(trajectory.sample_times(rate_hz) * 1e9).astype(np.int64))
-    q, qd, qdd = trajectory.sample(nanoseconds / 1e9)
+    if len(names) != waypoints.q.shape[1] or len(set(names)) != len(names):
+        raise ValueError(f"{len(names)} joint names (distinct) are needed for {waypoints.q.shape[1]} joints")
+    q, qd, qdd = waypoints.q, waypoints.qd, waypoints.qdd
     if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
-        raise ValueError("the trajectory has non-finite samples")
-
+        raise ValueError("the waypoints have non-finite values")
     lines = [
         "header: {stamp: {sec: 0, nanosec: 0}, frame_id: \"\"}",
         "joint_names: [" + ", ".join(json.dumps(n) for n in names) + "]",
         "points:",
     ]
     for ns, positions, velocities, accelerations in zip(
-        nanoseconds.tolist(), _yaml_rows(q), _yaml_rows(qd), _yaml_rows(qdd), strict=True
+        waypoints.nanoseconds.tolist(), _yaml_rows(q), _yaml_rows(qd), _yaml_rows(qdd), strict=True
     ):
         lines.append(
             f"  - positions: {positions}\n"
@@ -158,6 +167,25 @@ def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], ra
             f"    time_from_start: {{sec: {ns // 1_000_000_000}, nanosec: {ns % 1_000_000_000}}}"
         )
     return "\n".join(lines) + "\n"
+
+
+def follow_joint_trajectory_goal_text(
+    waypoints: Waypoints, joint_names: Sequence[str], goal_time_tolerance_s: float = GOAL_TIME_TOLERANCE_S
+) -> str:
+    """follow_joint_trajectory_goal.yaml: a ``control_msgs/action/FollowJointTrajectory`` goal, its
+    ``trajectory`` the text of :func:`joint_trajectory_text` and ``goal_time_tolerance`` (s) how long
+    after the last point's time the joints may take to reach it (the default path and goal
+    tolerances of the controller's configuration apply). ``ros2 action send_goal`` takes it as it is
+    (docs/robot.md)."""
+    if not (np.isfinite(goal_time_tolerance_s) and goal_time_tolerance_s >= 0):
+        raise ValueError(f"goal_time_tolerance_s must be a non-negative number, got {goal_time_tolerance_s}")
+    trajectory = joint_trajectory_text(waypoints, joint_names)
+    ns = round(goal_time_tolerance_s * 1e9)
+    return (
+        "trajectory:\n"
+        + "".join(f"  {line}\n" for line in trajectory.splitlines())
+        + f"goal_time_tolerance: {{sec: {ns // 1_000_000_000}, nanosec: {ns % 1_000_000_000}}}\n"
+    )
 
 
 def _yaml_rows(values: Array) -> list[str]:
@@ -178,13 +206,14 @@ def _yaml_rows(values: Array) -> list[str]:
     return ["[" + ", ".join(texts[i : i + n]) + "]" for i in range(0, len(texts), n)]
 
 
-def write_joint_trajectory(
-    path: str | Path, trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float
-) -> Path:
-    """Write :func:`joint_trajectory_text` to ``path``; returns the path."""
-    out = Path(path)
-    out.write_text(joint_trajectory_text(trajectory, joint_names, rate_hz))
-    return out
+def write_joint_trajectory(folder: str | Path, waypoints: Waypoints, joint_names: Sequence[str]) -> list[Path]:
+    """Write joint_trajectory.yaml (:func:`joint_trajectory_text`) and follow_joint_trajectory_goal.yaml
+    (:func:`follow_joint_trajectory_goal_text`) into ``folder``; returns their paths."""
+    out = Path(folder)
+    files = [out / JOINT_TRAJECTORY, out / FOLLOW_JOINT_TRAJECTORY_GOAL]
+    files[0].write_text(joint_trajectory_text(waypoints, joint_names))
+    files[1].write_text(follow_joint_trajectory_goal_text(waypoints, joint_names))
+    return files
 
 
 def read_joint_trajectory(path: str | Path, *, landmark_intervals: ArrayLike | None = None) -> Trajectory:

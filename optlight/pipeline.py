@@ -24,9 +24,10 @@ A straight line of stages, each taking built objects and returning a typed resul
    back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
-7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
+7. ``verify``: the controller waypoints chosen (:func:`~optlight.planning.waypoints.controller_waypoints`),
+   then dense resampling, independent of the planner (exact coal distances for the
    environment; the jerk and the acceleration continuity at ``[trajectory] rate_hz``; the exact view
-   and beam check at the captures, always).
+   and beam check at the captures, always; the waypoints' quintic interpolation).
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ from optlight.planning.set_landmarks import (
 )
 from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
+from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem, check_trajectory_samples
@@ -166,7 +168,8 @@ def solve(
         figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
 
     with stage("verify"):
-        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
+        waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, setup.trajectory_spec.rate_hz))
+        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers, waypoints)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -179,6 +182,7 @@ def solve(
         knot_ik=warm,
         nlp=nlp,
         trajectory=trajectory,
+        waypoints=waypoints,
         verification=report,
         timings=timings,
         warnings=tuple(notes),
@@ -446,13 +450,20 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
 
 
 def verify_knots(
-    setup: Setup, trajectory: Trajectory, positions: Array, theta: Array, transfers: NDArray[np.bool_]
+    setup: Setup,
+    trajectory: Trajectory,
+    positions: Array,
+    theta: Array,
+    transfers: NDArray[np.bool_],
+    waypoints: Waypoints | None = None,
 ) -> VerificationReport:
     """Verify ``trajectory`` independently of the planner, at max(1 kHz, ``rate_hz``): limits (jerk
     and acceleration continuity when jerk-limited), h and aim at the captures ``positions`` (M, 3)
     (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
     where the light must stay outside the sphere, the environment by exact coal distances, the
-    camera's view and the beam by exact ray casting at the captures."""
+    camera's view and the beam by exact ray casting at the captures, the joint torques (the lamp
+    included) against the robot's torque limits, and the quintic interpolation of the controller
+    ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
         trajectory,
@@ -476,5 +487,7 @@ def verify_knots(
             if setup.problem.view.mode != "off"
             else None
         ),
+        waypoints=waypoints,
+        dynamics=setup.dynamics,
         rate_hz=max(1000.0, spec.rate_hz),
     )

@@ -18,11 +18,13 @@ from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
+from optlight.planning.jerk import rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
@@ -45,7 +47,8 @@ class Plan:
     ``setup`` the built problem; ``landmarks`` the landmark search; ``visited`` the landmarks kept,
     in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
     ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
-    knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
+    knots; ``trajectory`` the timed motion; ``waypoints`` its points for a controller that interpolates
+    quintically (joint_trajectory.yaml); ``verification`` the independent check; ``timings``
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
     None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
@@ -61,6 +64,7 @@ class Plan:
     knot_ik: Array
     nlp: TrajectoryNLPResult
     trajectory: Trajectory
+    waypoints: Waypoints
     verification: VerificationReport
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
@@ -94,6 +98,33 @@ class Plan:
         intervals = self.trajectory.landmark_intervals
         return float(self.trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0]))
 
+    def motion_bound(self) -> dict[str, float]:
+        """The moving time against its rest-to-rest lower bound (s): the time-optimal moves between
+        the trajectory's postures at its captures, in its order, from the start configuration to the
+        first capture and back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
+        (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
+        paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
+        moves from and to the start."""
+        trajectory, limits = self.trajectory, self.setup.limits
+        intervals = trajectory.landmark_intervals
+        approach = bool(intervals[0, 0] > 0)
+        retreat = bool(trajectory.duration > intervals[-1, 1])
+        # the trajectory's own postures: at each dwell (the trajectory NLP may move a capture's joints
+        # in the arm's null space away from its placement), at the start and at the end
+        q = trajectory.sample(np.r_[0.0, intervals[:, 0], trajectory.duration])[0]
+        postures = q[(0 if approach else 1) : q.shape[0] - (0 if retreat else 1)]
+        moves = rest_to_rest_moves(postures, limits.velocity, limits.acceleration, limits.jerk)
+        inner = moves[int(approach) : moves.size - int(retreat)]
+        segments = trajectory.segment_times
+        bound = float(moves.sum())
+        return {
+            "motion_time_s": self.motion_time,
+            "rest_to_rest_s": bound,
+            "ratio": self.motion_time / bound if bound > 0 else 1.0,
+            "between_captures_s": float(np.sum(segments[:, 1] - segments[:, 0])),
+            "between_captures_rest_to_rest_s": float(inner.sum()),
+        }
+
     @property
     def light_directions_camera(self) -> Array:
         """(M, 3) unit vectors from the object to the light at each capture, OpenCV camera frame."""
@@ -117,6 +148,9 @@ class Plan:
             "knot_ik_path_length_rad": joint_path_length(self.knot_ik),
             "duration_s": self.trajectory.duration,
             "motion_time_s": self.motion_time,
+            "controller_waypoints": len(self.waypoints),
+            "torque_peak_fraction": _torque_fractions(self.verification),
+            "motion_bound": self.motion_bound(),
             "verification_passed": self.verification.passed,
             "min_clearance_m": {
                 name: -check.max_value
@@ -176,6 +210,7 @@ class Plan:
             path=self.path,
             nlp=self.nlp,
             trajectory=self.trajectory,
+            waypoints=self.waypoints,
             verification=self.verification,
             summary=summary,
             timings=self.timings,
@@ -207,3 +242,12 @@ class Plan:
 def joint_path_length(theta: Array) -> float:
     """Σ_k |θ_{k+1} − θ_k| (rad) of a (K, n) knot sequence."""
     return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))
+
+
+def _torque_fractions(report: VerificationReport) -> dict[str, float] | None:
+    """Per joint, its peak |τ| along the plan as a fraction of its torque limit; None for a robot
+    without published limits or a report without torques."""
+    torques = report.torques
+    if torques is None or torques.fraction is None:
+        return None
+    return dict(zip(torques.joints, torques.fraction, strict=True))

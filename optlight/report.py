@@ -6,7 +6,9 @@ their joint angles, the path, the trajectory NLP, the timed trajectory, the veri
 at once or not at all (:func:`optlight.export.write_results`):
 
 - ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
-  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
+  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory: the controller waypoints),
+  ``follow_joint_trajectory_goal.yaml`` (the same as a FollowJointTrajectory goal), ``captures.csv``
+  (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers);
@@ -38,6 +40,7 @@ from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.verify import VerificationReport
@@ -164,8 +167,13 @@ def report_markdown(
         f"| joint path length (NLP / per-knot IK) | {s['joint_path_length_rad']:.3f} rad / "
         f"{s['knot_ik_path_length_rad']:.3f} rad |",
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
+        f"| moving time / rest-to-rest bound (time-optimal stops at the same postures) | "
+        f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['rest_to_rest_s']:.2f} s "
+        f"({s['motion_bound']['ratio']:.2f}×) |",
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
+        f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
+        f"| peak joint torque / limit (the lamp {setup.problem.light.mass_kg:g} kg) | {_torque_text(verification)} |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
@@ -202,6 +210,17 @@ def report_markdown(
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
+
+
+def _torque_text(verification: VerificationReport) -> str:
+    """The largest fraction of a torque limit a joint reaches, and which; or why none is checked."""
+    torques = verification.torques
+    if torques is None:
+        return "not computed"
+    if torques.fraction is None:
+        return f"not checked: {torques.source}"
+    j = max(range(len(torques.joints)), key=lambda i: torques.fraction[i] if torques.fraction else 0.0)
+    return f"{torques.fraction[j]:.0%} ({torques.joints[j]}; every joint under Verification)"
 
 
 def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
@@ -302,6 +321,7 @@ def save_results(
     path: LightPath,
     nlp: TrajectoryNLPResult,
     trajectory: Trajectory,
+    waypoints: Waypoints,
     verification: VerificationReport,
     summary: Mapping[str, Any],
     timings: Mapping[str, float],
@@ -347,8 +367,7 @@ def save_results(
     traj_spec = setup.trajectory_spec
 
     def joint_trajectory(folder: Path) -> list[Path]:
-        out = folder / "joint_trajectory.yaml"
-        return [write_joint_trajectory(out, trajectory, robot.joint_names, traj_spec.rate_hz)]
+        return write_joint_trajectory(folder, waypoints, robot.joint_names)
 
     def captures(folder: Path) -> list[Path]:
         return [

@@ -7,7 +7,8 @@
   (the landmark search and the placement NLP), the two sharing the object;
 - the objectives on both scenes (``objective``, ``search_objective``), with their reference;
 - the robot, and the ``limits`` a plan must keep (its URDF velocity limits times ``[robot]
-  velocity_scale``);
+  velocity_scale``), and its ``dynamics`` with the lamp (``[light] mass_kg``, ``com_m``), whose joint
+  torques the verification checks against the robot's torque limits;
 - the environment: obstacles and self-collision when ``[environment] enabled``, the camera's view
   (``[view]``) unless it is off; its CasADi clearance and view functions are built on first use and
   kept by the environment;
@@ -42,7 +43,7 @@ from optlight.environment import CAPTURE_SLACK, LIGHT, Environment
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
-from optlight.robot import Robot, ik_settings, load_robot
+from optlight.robot import Dynamics, Lamp, Robot, ik_settings, load_robot
 from optlight.scene import Scene
 from optlight.spec import (
     EnvironmentSpec,
@@ -98,6 +99,7 @@ class Setup:
     ik: Mapping[str, Any]
     start: Array
     view_zenith: float
+    dynamics: Dynamics
 
     @classmethod
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
@@ -139,6 +141,7 @@ class Setup:
             ik=MappingProxyType(ik_settings(problem.solver)),
             start=start,
             view_zenith=view_zenith(problem, scene.sphere, environment, robot),
+            dynamics=Dynamics(robot, lamp_of(problem)),
         )
 
     @property
@@ -195,6 +198,12 @@ def reach_bound(robot: Robot) -> float:
             q = model.joints[j].idx_q
             total += float(max(abs(model.lowerPositionLimit[q]), abs(model.upperPositionLimit[q])))
     return max(total, 1.0)
+
+
+def lamp_of(problem: Problem) -> Lamp:
+    """The lamp of ``[light]`` as a rigid body: ``mass_kg``, ``com_m`` and the housing's cylinder."""
+    light = problem.light
+    return Lamp(light.mass_kg, light.com_m, light.housing_radius_m, light.housing_length_m)
 
 
 def _search_scene(scene: Scene, resolution: int) -> Scene:

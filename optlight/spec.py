@@ -169,6 +169,19 @@ class LightSpec:
     housing_length_m: float = key(
         0.06, "length of a cylindrical housing along the light's −z", unit="m", lo=0.0, lo_open=True
     )
+    mass_kg: float = key(
+        0.3,
+        "mass of the lamp the flange carries, for the joint torques (default: a small LED head, assumed "
+        "0.3 kg for an LED, its heat sink and driver in the 60 mm housing; weigh yours)",
+        unit="kg",
+        lo=0.0,
+    )
+    com_m: Vec3 = key(
+        (0.0, 0.0, 0.04),
+        "the lamp's centre of mass in the flange frame (default: assumed 0.04 m out along the tool axis, "
+        "the middle of a lamp that long; its rotational inertia is a solid cylinder of the housing's size)",
+        unit="m",
+    )
 
 
 @dataclass(frozen=True)
@@ -342,8 +355,8 @@ class TrajectorySpec:
     )
     rate_hz: float = key(
         1000.0,
-        "controller rate: trajectory.csv and joint_trajectory.yaml are sampled at it, the acceleration "
-        "continuity is checked at it",
+        "controller rate: trajectory.csv is sampled at it (joint_trajectory.yaml holds the waypoints "
+        "chosen on its grid), the acceleration continuity is checked at it",
         unit="Hz",
         lo=0.0,
         lo_open=True,

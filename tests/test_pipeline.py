@@ -16,6 +16,7 @@ from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
 from optlight.plan import joint_path_length
+from optlight.planning.jerk import rest_to_rest_duration
 from optlight.planning.timing import Trajectory
 from optlight.verify import verify_trajectory
 
@@ -205,15 +206,44 @@ def test_jerk_limited_plan_exports_for_the_controller(plan: optlight.Plan, tmp_p
     assert checks["jerk"].passed and checks["acceleration_continuity"].passed
     folder = tmp_path / "out"
     plan.save(folder, preview=False)
-    assert {"joint_trajectory.yaml", "captures.csv"} <= {p.name for p in folder.iterdir()}
+    written = {p.name for p in folder.iterdir()}
+    assert {"joint_trajectory.yaml", "follow_joint_trajectory_goal.yaml", "captures.csv"} <= written
     t = np.loadtxt(folder / "trajectory.csv", delimiter=",", skiprows=1, usecols=0)
     assert np.median(np.diff(t)) == pytest.approx(1.0 / plan.problem.trajectory.rate_hz)
     back = read_joint_trajectory(folder / "joint_trajectory.yaml")
-    times = np.linspace(0.0, plan.trajectory.duration, 101)
-    np.testing.assert_allclose(back.sample(times)[0], plan.trajectory.sample(times)[0], atol=1e-6)
+    times = np.linspace(0.0, plan.trajectory.duration, 2001)
+    np.testing.assert_allclose(back.sample(times)[0], plan.trajectory.sample(times)[0], atol=1e-4)
+    points = (folder / "joint_trajectory.yaml").read_text().count("positions: [")
+    assert checks["interpolation"].passed and points == len(plan.waypoints) < 0.1 * t.size
     lp = (folder / "lights.lp").read_text().split("\n")[1:-1]
     captures = (folder / "captures.csv").read_text().splitlines()[1:]
     assert [line.split()[0] for line in lp] == [row.split(",")[4] for row in captures]
+
+
+def test_moving_time_is_reported_against_its_rest_to_rest_bound(plan: optlight.Plan, tmp_path: Path) -> None:
+    """The time-optimal stops at the same postures, under the same limits, bound the moving time from
+    below; plan.json and report.md give both, and the peak torques per joint against their limits."""
+    bound = plan.summary()["motion_bound"]
+    assert bound["motion_time_s"] == pytest.approx(plan.motion_time)
+    assert 1.0 <= bound["ratio"] == pytest.approx(plan.motion_time / bound["rest_to_rest_s"])
+    assert 0 < bound["between_captures_rest_to_rest_s"] <= bound["between_captures_s"]
+    assert bound["between_captures_rest_to_rest_s"] < bound["rest_to_rest_s"]  # the approach and return too
+    # every move of the plan takes at least the slowest joint's double-S time between the postures
+    # the trajectory holds at its ends (the closed form, not ruckig), and the bound sums those
+    limits, segments = plan.setup.limits, plan.trajectory.segment_times
+    start, end = (plan.trajectory.sample(segments[:, k])[0] for k in (0, 1))
+    shortest = rest_to_rest_duration(np.abs(end - start), limits.velocity, limits.acceleration, limits.jerk).max(axis=1)
+    assert np.all(segments[:, 1] - segments[:, 0] >= shortest - 1e-9)
+    assert bound["between_captures_rest_to_rest_s"] == pytest.approx(shortest.sum(), rel=1e-9)
+    folder = tmp_path / "out"
+    plan.save(folder, preview=False)
+    saved = json.loads((folder / "plan.json").read_text())
+    assert saved["summary"]["motion_bound"] == pytest.approx(bound)
+    torques = saved["verification"]["torques"]
+    assert torques["joints"] == plan.robot.joint_names and len(torques["fraction"]) == plan.robot.n
+    assert saved["summary"]["torque_peak_fraction"] == dict(zip(torques["joints"], torques["fraction"], strict=True))
+    report = (folder / "report.md").read_text()
+    assert f"{bound['ratio']:.2f}×" in report and "peak joint torque / limit" in report
 
 
 def test_toppra_timing_stays_available() -> None:

@@ -38,7 +38,7 @@ LAYERS: list[set[str]] = [
     {"report"},
     {"plan"},
     {"pipeline", "preflight"},
-    {"acquisition", "batch"},
+    {"acquisition", "batch", "simulation"},
     {"cell"},
     {"cli"},
 ]

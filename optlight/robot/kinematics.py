@@ -40,7 +40,7 @@ CONTINUOUS_JOINTS = frozenset(
 )
 
 
-def _axis(model: pin.Model, joint: pin.JointModel) -> tuple[str, Array]:
+def joint_axis(model: pin.Model, joint: pin.JointModel) -> tuple[str, Array]:
     """("revolute" | "prismatic", unit axis in the joint frame) of a supported joint, read from its
     motion subspace S = (linear, angular) (constant for these joints)."""
     if joint.shortname() in PRISMATIC_JOINTS:
@@ -81,7 +81,7 @@ def symbolic_frame_pose(model: pin.Model, frame_id: int, name: str = "frame_pose
     pos: dict[int, ca.SX] = {0: ca.SX.zeros(3, 1)}
     for j in chain:
         joint = model.joints[j]
-        kind, axis = _axis(model, joint)
+        kind, axis = joint_axis(model, joint)
         place = model.jointPlacements[j]
         parent = model.parents[j]
         r_place = rot[parent] @ ca.DM(place.rotation)

@@ -38,6 +38,12 @@ configuration uses where there is one, else conservative, and the jerk :data:`DE
 ramp: the acceleration limit reached in 0.05 s, J = a_max / 0.05 s. ``robot.acceleration_limit`` and
 ``robot.jerk_limit`` override them (one value or one per joint).
 
+**Torque limits** (``RobotInfo.torque_limit``, N·m, checked along the plan with the lamp's mass by
+:mod:`optlight.robot.dynamics`): the maker's published joint torques where there are some (Franka's
+datasheet for panda; Universal Robots' for UR3/5/10), else the effort limits of the maker's URDF
+(xarm7, kinova, z1, and a user URDF), else none: a robot without them has its torques reported,
+not checked (:attr:`Robot.torque_limit` None).
+
 **User URDFs** (``robot.urdf``). Mesh files are found as ROS finds them (:func:`find_package`):
 ``package://NAME/rest`` is ``rest`` inside the package folder NAME, looked up in the URDF's folder
 and every folder above it (nearest first: a folder named NAME, or one holding a folder NAME), then
@@ -108,7 +114,9 @@ class RobotInfo:
 
     ``urdf``/``srdf`` are relative to example-robot-data's ``robots`` folder; ``tool_rpy_deg`` rotates
     the URDF tool frame into the flange frame (+z out of the tool); ``reference`` names an SRDF
-    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0.
+    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0;
+    ``torque_limit`` (N·m) the maker's published joint torques and ``torque_source`` where they are
+    published (None: the URDF's effort limits, if it has them).
     """
 
     urdf: str
@@ -121,6 +129,8 @@ class RobotInfo:
     velocity_limit: tuple[float, ...] | float | None = None
     acceleration_limit: tuple[float, ...] | float = DEFAULT_ACCELERATION_LIMIT
     jerk_limit: tuple[float, ...] | float | None = None
+    torque_limit: tuple[float, ...] | None = None
+    torque_source: str = ""
 
     def jerk(self) -> tuple[float, ...] | float:
         """The published jerk limit, else the acceleration limit over :data:`DEFAULT_JERK_RAMP_S`."""
@@ -138,6 +148,13 @@ _UR10_SPEED = (120 * _DEG,) * 2 + (180 * _DEG,) * 4
 #: accelerations (only on torques)"); UR's own MoveIt configuration uses 5 rad/s² for every joint
 #: (UniversalRobots/Universal_Robots_ROS2_Driver, ur_moveit_config/config/joint_limits.yaml).
 _UR_ACCELERATION = 5.0
+#: Universal Robots, "Max. joint torques" (universal-robots.com/articles/ur-articles/max-joint-torques,
+#: the CB3 and e-Series sizes): base, shoulder, elbow, wrist 1–3 (N·m). example-robot-data's UR3 URDF
+#: carries the UR10's efforts (330, 330, 150, 54, 54, 54) and its UR10 URDF 54 on the wrists.
+_UR_TORQUE_SOURCE = "Universal Robots, Max. joint torques (universal-robots.com)"
+_UR3_TORQUE = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
+_UR5_TORQUE = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
+_UR10_TORQUE = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
 
 
 ROBOTS: dict[str, RobotInfo] = {
@@ -152,12 +169,17 @@ ROBOTS: dict[str, RobotInfo] = {
         velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
         acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
         jerk_limit=7500.0,
+        # the same page: τ_max 87 N·m (joints 1–4), 12 N·m (joints 5–7)
+        torque_limit=(87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
+        torque_source="Franka Emika, Robot and interface specifications",
     ),
     "ur3": RobotInfo(
         "ur_description/urdf/ur3_robot.urdf",
         None,
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR3_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR3_SPEED,  # UR3 CB3 datasheet: base, shoulder, elbow 180°/s, wrists 360°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -166,6 +188,8 @@ ROBOTS: dict[str, RobotInfo] = {
         "ur_description/srdf/ur5.srdf",
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR5_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR5_SPEED,  # UR5 CB3 datasheet: every joint 180°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -174,6 +198,8 @@ ROBOTS: dict[str, RobotInfo] = {
         None,
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR10_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR10_SPEED,  # UR10 CB3 datasheet: base, shoulder 120°/s, the others 180°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -281,7 +307,8 @@ class Robot:
     ``flange_frame_id``/``light_frame_id`` (frames ``flange``, ``light``); ``joint_names`` (URDF names,
     θ order); ``n``; ``lower``/``upper`` (rad or m), ``velocity_limit`` (rad/s or m/s),
     ``acceleration_limit`` (rad/s² or m/s²), ``jerk_limit`` (rad/s³ or m/s³), ``theta_ref``: arrays of
-    length n. ``base_placement`` is
+    length n; ``torque_limit`` (N·m or N, length n, or None where none are published) and
+    ``torque_limit_source`` (where they come from, or why there are none). ``base_placement`` is
     T_WB. ``urdf_path``/``package_dirs``/``locked_joints`` rebuild geometry (:meth:`geometry_model`).
     """
 
@@ -298,6 +325,8 @@ class Robot:
         urdf_path: Path,
         package_dirs: Sequence[Path],
         locked_joints: dict[str, float],
+        torque_limit: ArrayLike | None = None,
+        torque_limit_source: str = "no published torque limits",
     ) -> None:
         self.name = name
         self.model = model
@@ -334,6 +363,11 @@ class Robot:
         else:
             ref = _wrap_into_limits(np.asarray(theta_ref, float), self.lower, self.upper)
         self.theta_ref = ref
+        self.torque_limit: Array | None = None
+        if torque_limit is not None:
+            self.torque_limit = np.broadcast_to(np.asarray(torque_limit, float), (self.n,)).copy()
+            self.torque_limit.setflags(write=False)
+        self.torque_limit_source = torque_limit_source
         #: The SRDF's named configurations (group states), as joint angles θ; filled by load_robot.
         self.named_configurations: dict[str, Array] = {}
         limits = (self.velocity_limit, self.acceleration_limit, self.jerk_limit)
@@ -462,6 +496,21 @@ def _unread_visual_meshes(model: pin.Model, urdf: Path) -> pin.GeometryModel:
             path, scale = meshes[obj.name]
             obj.geometry, obj.meshPath, obj.meshScale = coal.BVHModelOBBRSS(), str(path), scale
     return geom
+
+
+def _torque_limit(info: RobotInfo, model: pin.Model, urdf: Path) -> tuple[Array | None, str]:
+    """The joint torque limits (N·m) of the (reduced) model and where they come from: the maker's
+    published ones (``info.torque_limit``), else the URDF's effort limits when every joint has one
+    (> 0), else None."""
+    if info.torque_limit is not None:
+        limit = np.asarray(info.torque_limit, float)
+        if limit.shape != (model.nv,):
+            raise RobotError(f"{urdf.name}: {limit.size} torque limits for {model.nv} joints")
+        return limit, info.torque_source
+    effort = np.array([model.effortLimit[j.idx_v] for j in model.joints[1:]], float)
+    if effort.size == model.nv and np.all(np.isfinite(effort)) and np.all(effort > 0):
+        return effort, f"the effort limits of {urdf.name}"
+    return None, f"no published torque limits ({urdf.name} has no effort limits)"
 
 
 def _wrap_into_limits(theta: Array, lower: Array, upper: Array) -> Array:
@@ -754,6 +803,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if arr.ndim and arr.shape not in ((1,), (model.nv,)):
             raise RobotError(f"robot.{name}: {arr.size} values for the {model.nv} joints of {spec.name}")
         limits[name] = arr.ravel() if arr.shape != (1,) else arr[0]
+    torque, torque_source = _torque_limit(info, model, urdf_path)
     robot = Robot(
         spec.name,
         model,
@@ -765,6 +815,8 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         urdf_path=urdf_path,
         package_dirs=package_dirs,
         locked_joints=locked,
+        torque_limit=torque,
+        torque_limit_source=torque_source,
     )
     robot.named_configurations = {
         name: _wrap_into_limits(reduced_angles(q), robot.lower, robot.upper) for name, q in states.items()
