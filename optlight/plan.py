@@ -18,10 +18,10 @@ from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
+from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
-from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot

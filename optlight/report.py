@@ -28,9 +28,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.export import write_captures, write_joint_trajectory, write_results
+from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
-from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.scene import Scene
 from optlight.setup import Setup

@@ -15,8 +15,8 @@ import optlight
 from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
+from optlight.motion import Trajectory
 from optlight.plan import joint_path_length
-from optlight.planning.timing import Trajectory
 from optlight.verify import verify_trajectory
 
 
