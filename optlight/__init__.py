@@ -44,6 +44,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import time_parameterize
+    from optlight.report import FigureDrafts
     from optlight.robot import IKResult, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
@@ -81,6 +82,7 @@ _LAZY = {
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
     "FigureWorker": "optlight.viz.drawing",
+    "FigureDrafts": "optlight.report",
     "save_gray_png": "optlight.viz.images",
     "acquire": "optlight.acquisition",
     "Acquisition": "optlight.acquisition",

@@ -1,7 +1,8 @@
 """The whole job: ``plan = optlight.solve(problem)``, then ``plan.save(folder)``.
 
 A straight line of stages, each taking built objects and returning a typed result (each timed in
-``Plan.timings``):
+``Plan.timings``, each heard by the caller's ``on_stage`` listener as it finishes, :mod:`optlight.stages`;
+the solve draws nothing and writes nothing):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
    (no stage of the solve when the caller passes it built, as the command line does in its checks);
@@ -36,7 +37,6 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
 from optlight.errors import SolverError
+from optlight.motion import Trajectory
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
@@ -65,39 +66,55 @@ from optlight.planning.set_landmarks import (
     set_summary,
     tour_order,
 )
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
-from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem
+from optlight.stages import STAGES, OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
-from optlight.viz.drawing import FigureWorker
 
 Array = NDArray[np.float64]
 
 #: progress(stage, done, total): called as each stage advances.
 Progress = Callable[[str, int, int], None]
 
-STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
+__all__ = [  # STAGES is optlight.stages', named here too: the command line shows them as the solve runs
+    "NLP_WINDOW_KNOTS",
+    "STAGES",
+    "PlacementAhead",
+    "Progress",
+    "capture_path",
+    "choose_captures",
+    "optimize_path",
+    "optimize_window",
+    "place_captures",
+    "route_captures",
+    "solve",
+    "time_knots",
+    "unfollowed_segments",
+    "verify_knots",
+]
 
 
 def solve(
     problem: Problem | Setup | str | Path,
     *,
     progress: Progress | None = None,
-    worker: FigureWorker | None = None,
+    on_stage: StageListener | None = None,
 ) -> Plan:
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
-    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the figures of the
-    results folder are drawn there while the rest is solved (:attr:`Plan.figures`): the landmark
-    figures once the captures are placed, the motion's once it is timed.
+    end to end. ``on_stage(stage, result)`` hears each stage finish, with its typed result
+    (:mod:`optlight.stages`): the command line subscribes the figure worker there
+    (:class:`~optlight.report.FigureDrafts`), which draws the results folder's figures while the rest
+    is solved.
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
     shown); :meth:`Plan.save` refuses to export it.
     """
     notify = progress or (lambda stage, done, total: None)
+    heard = on_stage or (lambda stage, result: None)
     timings: dict[str, float] = {}
     t_total = time.perf_counter()
 
@@ -109,11 +126,12 @@ def solve(
         timings[name] = time.perf_counter() - start
         notify(name, 1, 1)
 
-    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): no stage here
+    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): not timed here
         setup = problem
     else:
         with stage("scene"):
             setup = Setup.from_problem(problem)
+    heard("scene", setup)
 
     start = time.perf_counter()
     reacher = Reacher(setup)
@@ -122,33 +140,38 @@ def solve(
             setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
         )
         timings["landmarks"] = time.perf_counter() - start
+        heard("landmarks", landmarks)
 
         with stage("placement"):  # what is left of it once the search is done
             if design is None:
                 placement = ahead.placement(captures)
             else:
                 placement = place_captures(setup, captures, design, reacher)
-    figures: dict[str, Future[bytes]] = {}
-    if worker is not None:  # drawn there while the motion is planned, with the captures placed
-        jobs = landmark_jobs(landmarks, setup.scene, placement.landmarks)
-        figures = {n: worker.draw(job) for n, job in jobs.items()}
+    heard("placement", placement)
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
-        visited = tuple(placement.landmarks[i] for i in order)
-        positions = np.array([lm.position for lm in visited])
-        landmark_thetas = placement.thetas[order]
-        path = capture_path(setup, positions, landmark_thetas)
-        warm, failures = knot_ik(setup, path, landmark_thetas)
-    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
-    if failures.any():
-        notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
+        route = route_captures(setup, placement, design is not None)
+    heard("path", route)
+    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, route.order) if design else None
+    if route.failures.any():
+        notes.append(
+            f"per-knot IK did not converge at {route.failures.sum()} of {route.path.n_knots} knots (NLP warm start)"
+        )
 
     with stage("nlp"):
-        path, warm, nlp = optimize_path(
-            setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
+        optimized = OptimizedPath(
+            *optimize_path(
+                setup,
+                route.path,
+                route.knot_ik,
+                route.failures,
+                route.landmark_thetas,
+                lambda d, t: notify("nlp", d, t),
+            )
         )
+    heard("nlp", optimized)
+    path, theta = optimized.path, optimized.nlp.theta
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -158,30 +181,30 @@ def solve(
         )
 
     with stage("timing"):
-        trajectory = time_knots(setup, path, nlp.theta)
-    if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
-        figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
+        trajectory = time_knots(setup, path, theta)
+    heard("timing", trajectory)
 
     with stage("verify"):
-        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
+        positions = np.array([lm.position for lm in route.visited])
+        report = verify_knots(setup, trajectory, positions, theta, path.transfers)
+    heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
     return Plan(
         setup=setup,
         landmarks=landmarks,
-        visited=visited,
-        landmark_thetas=landmark_thetas,
+        visited=route.visited,
+        landmark_thetas=route.landmark_thetas,
         path=path,
-        knot_ik=warm,
-        nlp=nlp,
+        knot_ik=optimized.knot_ik,
+        nlp=optimized.nlp,
         trajectory=trajectory,
         verification=report,
         timings=timings,
         warnings=tuple(notes),
         lightset=lightset,
         reach=design.reach if design is not None else None,
-        figures=figures,
     )
 
 
@@ -287,6 +310,19 @@ class PlacementAhead:
     def __exit__(self, *exc: object) -> None:
         self._stopped = True
         self._join()
+
+
+def route_captures(setup: Setup, placement: LandmarkPlacement, tour: bool) -> Route:
+    """The ``path`` stage: the visiting order of the placed captures (a light set's joint-space
+    tour with ``tour``, :func:`~optlight.planning.set_landmarks.tour_order`; else
+    :func:`~optlight.planning.policy.visiting_order`), the great-circle knots through them
+    (:func:`capture_path`) and the per-knot IK along the knots (the NLP's warm start)."""
+    order = tour_order(placement.thetas) if tour else visiting_order(setup, placement)
+    visited = tuple(placement.landmarks[i] for i in order)
+    landmark_thetas = placement.thetas[order]
+    path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
+    warm, failures = knot_ik(setup, path, landmark_thetas)
+    return Route(order, visited, landmark_thetas, path, warm, failures)
 
 
 def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> LightPath:

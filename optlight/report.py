@@ -1,9 +1,9 @@
 """The results folder of a plan: files, figures, the offline preview and a readable report.
 
-Built from the pieces a solve produces (the setup, the landmark search, the landmarks visited and
-their joint angles, the path, the trajectory NLP, the timed trajectory, the verification), not from
-:class:`~optlight.plan.Plan`, which sits above this module. ``save_results(folder, ...)`` writes, all
-at once or not at all (:func:`optlight.export.write_results`):
+Built from a solved plan as :class:`PlanRecord` sees it (the setup, the landmark search, the landmarks
+visited and their joint angles, the path, the trajectory NLP, the timed trajectory, the verification):
+:class:`~optlight.plan.Plan` is one, and sits above this module. ``save_results(folder, plan, ...)``
+writes, all at once or not at all (:func:`optlight.export.write_results`):
 
 - ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
   directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
@@ -13,6 +13,10 @@ at once or not at all (:func:`optlight.export.write_results`):
 - for a light set, what :class:`~optlight.plan.Plan` adds: ``photometric_stereo/`` (the DiLiGenT
   layout, :func:`optlight.datasets.model_capture`), ``normal_map.png`` and ``normal_error.png``, and
   with a reachability map (``[lightset] design_over = "reachable"``) ``lightset_reach.png``.
+
+The figures can be drawn while the plan is still being solved: :class:`FigureDrafts` listens to the
+solve's stages (:mod:`optlight.stages`) and hands a worker process each figure as soon as its numbers
+exist.
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,9 +35,11 @@ from optlight.export import write_captures, write_joint_trajectory, write_result
 from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
+from optlight.planning.policy import LandmarkPlacement
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.scene import Scene
 from optlight.setup import Setup
+from optlight.stages import OptimizedPath, Route
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob
 from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
@@ -48,17 +54,39 @@ Array = NDArray[np.float64]
 RESULTS_DPI = 120
 
 
-def plan_dict(
-    setup: Setup,
-    landmarks: LandmarkSet,
-    visited: Sequence[Landmark],
-    landmark_thetas: Array,
-    path: LightPath,
-    nlp: TrajectoryNLPResult,
-    summary: Mapping[str, Any],
-    warnings: Sequence[str],
-) -> dict[str, Any]:
-    """What plan.json records besides the trajectory and the verification (which export adds)."""
+class PlanRecord(Protocol):
+    """What the results folder reads of a solved plan (:class:`~optlight.plan.Plan` is one: see its
+    fields)."""
+
+    @property
+    def setup(self) -> Setup: ...
+    @property
+    def landmarks(self) -> LandmarkSet: ...
+    @property
+    def visited(self) -> Sequence[Landmark]: ...
+    @property
+    def landmark_thetas(self) -> Array: ...
+    @property
+    def path(self) -> LightPath: ...
+    @property
+    def nlp(self) -> TrajectoryNLPResult: ...
+    @property
+    def trajectory(self) -> Trajectory: ...
+    @property
+    def verification(self) -> VerificationReport: ...
+    @property
+    def timings(self) -> Mapping[str, float]: ...
+    @property
+    def warnings(self) -> Sequence[str]: ...
+    @property
+    def light_directions_camera(self) -> Array: ...
+
+
+def plan_dict(plan: PlanRecord, summary: Mapping[str, Any]) -> dict[str, Any]:
+    """What plan.json records of ``plan`` besides the trajectory and the verification (which export
+    adds); ``summary`` its key numbers."""
+    setup, nlp, path = plan.setup, plan.nlp, plan.path
+    landmarks, visited = plan.landmarks, plan.visited
     problem, robot, spec = setup.problem, setup.robot, setup.problem.robot
     return {
         "problem": problem.to_dict(),
@@ -90,7 +118,7 @@ def plan_dict(
                 "time_s": lm.time_s,
                 "theta": theta,
             }
-            for i, (lm, theta) in enumerate(zip(visited, landmark_thetas, strict=True))
+            for i, (lm, theta) in enumerate(zip(visited, plan.landmark_thetas, strict=True))
         ],
         "landmark_search": {
             "mode": landmarks.mode,
@@ -111,20 +139,14 @@ def plan_dict(
             "transfers": np.flatnonzero(path.transfers),  # segments off the sphere, in visiting order
         },
         "summary": dict(summary),
-        "warnings": list(warnings),
+        "warnings": list(plan.warnings),
     }
 
 
-def report_markdown(
-    setup: Setup,
-    summary: Mapping[str, Any],
-    timings: Mapping[str, float],
-    verification: VerificationReport,
-    warnings: Sequence[str],
-    figures: Sequence[str],
-) -> str:
-    """report.md: what was solved, the key numbers, the verification and the figures."""
-    s, t = summary, timings
+def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Sequence[str]) -> str:
+    """report.md of ``plan``: what was solved, the key numbers (``summary``), the verification and the
+    ``figures`` (PNG file names)."""
+    setup, s, t = plan.setup, summary, plan.timings
     view = setup.problem.view
     protected = (
         "> **The camera's view is not protected** (`[view] mode = \"off\"`): robot links or the lamp may "
@@ -171,14 +193,14 @@ def report_markdown(
         "## Verification",
         "",
         "```",
-        verification.summary(),
+        plan.verification.summary(),
         "```",
         "",
     ]
     if "lightset" in s:
         lines += _lightset_lines(s["lightset"])
-    if warnings:
-        lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
+    if plan.warnings:
+        lines += ["## Warnings", "", *(f"- {w}" for w in plan.warnings), ""]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
@@ -274,19 +296,9 @@ def _png_source(job: FigureJob, worker: FigureWorker | None) -> Callable[[], byt
 
 def save_results(
     folder: str | Path,
+    plan: PlanRecord,
     *,
-    setup: Setup,
-    landmarks: LandmarkSet,
-    visited: Sequence[Landmark],
-    landmark_thetas: Array,
-    path: LightPath,
-    nlp: TrajectoryNLPResult,
-    trajectory: Trajectory,
-    verification: VerificationReport,
     summary: Mapping[str, Any],
-    timings: Mapping[str, float],
-    warnings: Sequence[str],
-    light_directions_camera: Array,
     preview: Callable[[Path], Path] | None = None,
     overwrite: bool = False,
     extra_figures: Mapping[str, FigureJob] | None = None,
@@ -294,21 +306,23 @@ def save_results(
     worker: FigureWorker | None = None,
     drawn: Mapping[str, Future[bytes]] | None = None,
 ) -> list[Path]:
-    """Write the results folder of a verified plan (see the module docstring); returns the paths.
-    ``preview(path)`` writes ``preview.html`` (left out when None); ``extra_figures`` and
-    ``extra_writers`` add figures and files (a light set's photometric-stereo folder); ``worker``
-    draws the figures while the rest is written (:mod:`optlight.viz.drawing`), else they are drawn
-    here; ``drawn`` are figures a worker drew (or is drawing) already, by file stem.
+    """Write the results folder of a verified ``plan`` (see the module docstring), with its key
+    numbers ``summary``; returns the paths. ``preview(path)`` writes ``preview.html`` (left out when
+    None); ``extra_figures`` and ``extra_writers`` add figures and files (a light set's
+    photometric-stereo folder); ``worker`` draws the figures while the rest is written
+    (:mod:`optlight.viz.drawing`), else they are drawn here; ``drawn`` are figures a worker drew (or
+    is drawing) already, by file stem (:attr:`FigureDrafts.figures`).
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
-    robot = setup.robot
+    setup, trajectory, visited = plan.setup, plan.trajectory, plan.visited
+    robot, traj_spec = setup.robot, setup.trajectory_spec
     drawn = {name: png for name, png in (drawn or {}).items() if not png.cancelled()}
     # the landmark jobs only when one is not drawn: making the contact sheet's renders its images
-    missing = not drawn.keys() >= set(_landmark_figure_names(landmarks))
+    missing = not drawn.keys() >= set(_landmark_figure_names(plan.landmarks))
     figures = {
-        **motion_jobs(setup, visited, nlp.theta, trajectory),
-        **(landmark_jobs(landmarks, setup.scene, visited) if missing else {}),
+        **motion_jobs(setup, visited, plan.nlp.theta, trajectory),
+        **(landmark_jobs(plan.landmarks, setup.scene, visited) if missing else {}),
         **(extra_figures or {}),
     }
     sources: dict[str, Callable[[], bytes]] = {name: png.result for name, png in drawn.items()}
@@ -321,10 +335,8 @@ def save_results(
     def report(folder: Path) -> list[Path]:
         names = sorted(f"{name}.png" for name in sources)
         out = folder / "report.md"
-        out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
+        out.write_text(report_markdown(plan, summary, names))
         return [out]
-
-    traj_spec = setup.trajectory_spec
 
     def joint_trajectory(folder: Path) -> list[Path]:
         out = folder / "joint_trajectory.yaml"
@@ -337,7 +349,7 @@ def save_results(
                 trajectory,
                 settle_s=traj_spec.settle_s,
                 image_pattern=traj_spec.image_pattern,
-                light_directions_camera=light_directions_camera,
+                light_directions_camera=plan.light_directions_camera,
                 light_positions=np.array([lm.position for lm in visited]),
                 joint_names=robot.joint_names,
             )
@@ -353,13 +365,51 @@ def save_results(
     return write_results(
         folder,
         trajectory=trajectory,
-        report=verification,
-        plan_dict=plan_dict(setup, landmarks, visited, landmark_thetas, path, nlp, summary, warnings),
+        report=plan.verification,
+        plan_dict=plan_dict(plan, summary),
         joint_names=robot.joint_names,
-        light_directions_camera=light_directions_camera,
-        image_pattern=setup.trajectory_spec.image_pattern,
+        light_directions_camera=plan.light_directions_camera,
+        image_pattern=traj_spec.image_pattern,
         figures=sources,
         writers=writers,
         overwrite=overwrite,
         csv_rate_hz=traj_spec.rate_hz,
     )
+
+
+class FigureDrafts:
+    """A stage listener (:data:`optlight.stages.StageListener`: ``solve(..., on_stage=drafts)``)
+    that hands ``worker`` the results folder's figures as soon as their numbers exist: the landmark
+    figures once the captures are placed (drawn while the motion is planned), the trajectory and path
+    figures once the motion is timed (drawn while it is verified and the rest is written).
+    :attr:`figures`, by file stem, go to :meth:`~optlight.plan.Plan.save` (``drawn=``), which takes
+    them as they are: the same figures :func:`save_results` would draw."""
+
+    def __init__(self, worker: FigureWorker) -> None:
+        self.worker = worker
+        self.figures: dict[str, Future[bytes]] = {}
+        self._setup: Setup | None = None
+        self._landmarks: LandmarkSet | None = None
+        self._route: Route | None = None
+        self._knots: OptimizedPath | None = None
+
+    def __call__(self, stage: str, result: object) -> None:
+        """Hear that ``stage`` finished with ``result`` (the table of :mod:`optlight.stages`)."""
+        match result:
+            case Setup():
+                self._setup = result
+            case LandmarkSet():
+                self._landmarks = result
+            case LandmarkPlacement():
+                assert self._setup is not None and self._landmarks is not None, "scene and landmarks first"
+                self._draw(landmark_jobs(self._landmarks, self._setup.scene, result.landmarks))
+            case Route():
+                self._route = result
+            case OptimizedPath():
+                self._knots = result
+            case Trajectory():
+                assert self._setup is not None and self._route is not None and self._knots is not None
+                self._draw(motion_jobs(self._setup, self._route.visited, self._knots.nlp.theta, result))
+
+    def _draw(self, jobs: Mapping[str, FigureJob]) -> None:
+        self.figures |= {name: self.worker.draw(job) for name, job in jobs.items()}
