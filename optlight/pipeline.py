@@ -1,11 +1,11 @@
 """The whole job: ``plan = optlight.solve(problem)``, then ``plan.save(folder)``.
 
-A straight line of stages, each taking built objects and returning a typed result (each timed in
-``Plan.timings``, each heard by the caller's ``on_stage`` listener as it finishes, :mod:`optlight.stages`;
+A straight line of stages, each taking built objects and returning a typed result, each timed in
+``Plan.timings`` and heard by the caller's ``on_stage`` listener as it finishes (:mod:`optlight.stages`;
 the solve draws nothing and writes nothing):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
-   (no stage of the solve when the caller passes it built, as the command line does in its checks);
+   (not timed when the caller passes it built, as the command line does in its checks; still heard);
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
    on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
    designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-

@@ -17,6 +17,8 @@ from optlight.export import MANIFEST
 from optlight.geometry import h_residual
 from optlight.motion import Trajectory
 from optlight.plan import joint_path_length
+from optlight.planning.policy import LandmarkPlacement
+from optlight.stages import STAGES, OptimizedPath, Route
 from optlight.verify import verify_trajectory
 
 
@@ -27,8 +29,33 @@ def small_problem(**overrides: dict) -> optlight.Problem:
 
 
 @pytest.fixture(scope="module")
-def plan() -> optlight.Plan:
-    return optlight.solve(small_problem())
+def solved() -> tuple[optlight.Plan, list[tuple[str, object]]]:
+    """The small problem's plan, and what its stage listener heard: (stage, result) in order."""
+    heard: list[tuple[str, object]] = []
+    return optlight.solve(small_problem(), on_stage=lambda stage, result: heard.append((stage, result))), heard
+
+
+@pytest.fixture(scope="module")
+def plan(solved: tuple[optlight.Plan, list[tuple[str, object]]]) -> optlight.Plan:
+    return solved[0]
+
+
+def test_the_listener_hears_every_stage_with_its_result(
+    solved: tuple[optlight.Plan, list[tuple[str, object]]],
+) -> None:
+    """Each stage, in order, once, with the typed result the plan is made of (optlight.stages)."""
+    plan, heard = solved
+    assert [stage for stage, _ in heard] == list(STAGES)
+    results = dict(heard)
+    assert results["scene"] is plan.setup and results["landmarks"] is plan.landmarks
+    placement = results["placement"]
+    route, optimized = results["path"], results["nlp"]
+    assert isinstance(placement, LandmarkPlacement) and isinstance(route, Route) and route.visited is plan.visited
+    assert all(placement.landmarks[i] is v for i, v in zip(route.order, plan.visited, strict=True))
+    np.testing.assert_array_equal(route.landmark_thetas, plan.landmark_thetas)
+    np.testing.assert_array_equal(placement.thetas[route.order], plan.landmark_thetas)
+    assert isinstance(optimized, OptimizedPath) and optimized.nlp is plan.nlp and optimized.path is plan.path
+    assert results["timing"] is plan.trajectory and results["verify"] is plan.verification
 
 
 def test_plan_meets_the_light_constraints_and_limits(plan: optlight.Plan) -> None:
