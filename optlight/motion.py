@@ -240,8 +240,9 @@ class Trajectory:
 
     def jerk(self, t: ArrayLike) -> Array:
         """Joint jerks q⃛ (rad/s³), shape (T, n), at times t (s), like :meth:`sample`. A
-        :func:`~optlight.planning.timing.time_parameterize` (TOPPRA) trajectory gives the value inside its constant-s̈ intervals:
-        its q̈ steps between them, which only an impulse of q⃛ could represent."""
+        :func:`~optlight.planning.timing.time_parameterize` (TOPPRA) trajectory gives the value inside
+        its constant-s̈ intervals: its q̈ steps between them, which only an impulse of q⃛ could
+        represent."""
         return self._evaluate(t, lambda piece, local: (piece.jerk(local),), 1)[0]
 
     def _evaluate(

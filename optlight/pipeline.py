@@ -153,11 +153,12 @@ def solve(
     with stage("path"):
         route = route_captures(setup, placement, design is not None)
     heard("path", route)
-    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, route.order) if design else None
+    lightset = (
+        set_summary(setup, design, placement.landmarks, placement.thetas, route.order) if design else None
+    )
     if route.failures.any():
-        notes.append(
-            f"per-knot IK did not converge at {route.failures.sum()} of {route.path.n_knots} knots (NLP warm start)"
-        )
+        missed, knots = route.failures.sum(), route.path.n_knots
+        notes.append(f"per-knot IK did not converge at {missed} of {knots} knots (NLP warm start)")
 
     with stage("nlp"):
         optimized = OptimizedPath(

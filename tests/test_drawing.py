@@ -56,7 +56,8 @@ def test_a_results_folder_is_the_same_with_a_worker(tmp_path: Path) -> None:
         plan = optlight.solve(problem, on_stage=drafts)
         assert [c.index for c in plan.visited if c.status == "placed"] == [7]
         landmark_stems = ["landmarks_cost", "landmarks_histograms", "landmarks_images", "landmarks_polar"]
-        assert sorted(drafts.figures) == sorted([*landmark_stems, "path", "trajectory"])  # all drawn in the solve
+        # all drawn as the solve's stages finished
+        assert sorted(drafts.figures) == sorted([*landmark_stems, "path", "trajectory"])
         plan.save(there, preview=False, worker=worker, drawn=drafts.figures)
     files = sorted(p.name for p in here.iterdir())
     assert files == sorted(p.name for p in there.iterdir())

@@ -32,7 +32,8 @@ def small_problem(**overrides: dict) -> optlight.Problem:
 def solved() -> tuple[optlight.Plan, list[tuple[str, object]]]:
     """The small problem's plan, and what its stage listener heard: (stage, result) in order."""
     heard: list[tuple[str, object]] = []
-    return optlight.solve(small_problem(), on_stage=lambda stage, result: heard.append((stage, result))), heard
+    plan = optlight.solve(small_problem(), on_stage=lambda stage, result: heard.append((stage, result)))
+    return plan, heard
 
 
 @pytest.fixture(scope="module")
@@ -50,7 +51,8 @@ def test_the_listener_hears_every_stage_with_its_result(
     assert results["scene"] is plan.setup and results["landmarks"] is plan.landmarks
     placement = results["placement"]
     route, optimized = results["path"], results["nlp"]
-    assert isinstance(placement, LandmarkPlacement) and isinstance(route, Route) and route.visited is plan.visited
+    assert isinstance(placement, LandmarkPlacement) and isinstance(route, Route)
+    assert route.visited is plan.visited
     assert all(placement.landmarks[i] is v for i, v in zip(route.order, plan.visited, strict=True))
     np.testing.assert_array_equal(route.landmark_thetas, plan.landmark_thetas)
     np.testing.assert_array_equal(placement.thetas[route.order], plan.landmark_thetas)
