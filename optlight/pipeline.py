@@ -70,7 +70,7 @@ from optlight.planning.timing import time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
 from optlight.setup import Setup
 from optlight.spec import Problem
-from optlight.stages import STAGES, OptimizedPath, Route, StageListener
+from optlight.stages import OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
 
@@ -79,22 +79,7 @@ Array = NDArray[np.float64]
 #: progress(stage, done, total): called as each stage advances.
 Progress = Callable[[str, int, int], None]
 
-__all__ = [  # STAGES is optlight.stages', named here too: the command line shows them as the solve runs
-    "NLP_WINDOW_KNOTS",
-    "STAGES",
-    "PlacementAhead",
-    "Progress",
-    "capture_path",
-    "choose_captures",
-    "optimize_path",
-    "optimize_window",
-    "place_captures",
-    "route_captures",
-    "solve",
-    "time_knots",
-    "unfollowed_segments",
-    "verify_knots",
-]
+STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
 
 
 def solve(
@@ -151,28 +136,22 @@ def solve(
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        route = route_captures(setup, placement, design is not None)
-    heard("path", route)
-    lightset = (
-        set_summary(setup, design, placement.landmarks, placement.thetas, route.order) if design else None
-    )
-    if route.failures.any():
-        missed, knots = route.failures.sum(), route.path.n_knots
-        notes.append(f"per-knot IK did not converge at {missed} of {knots} knots (NLP warm start)")
+        order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
+        visited = tuple(placement.landmarks[i] for i in order)
+        positions = np.array([lm.position for lm in visited])
+        landmark_thetas = placement.thetas[order]
+        path = capture_path(setup, positions, landmark_thetas)
+        warm, failures = knot_ik(setup, path, landmark_thetas)
+    heard("path", Route(order, visited, landmark_thetas, path, warm, failures))
+    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
+    if failures.any():
+        notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
-        optimized = OptimizedPath(
-            *optimize_path(
-                setup,
-                route.path,
-                route.knot_ik,
-                route.failures,
-                route.landmark_thetas,
-                lambda d, t: notify("nlp", d, t),
-            )
+        path, warm, nlp = optimize_path(
+            setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
         )
-    heard("nlp", optimized)
-    path, theta = optimized.path, optimized.nlp.theta
+    heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -182,12 +161,11 @@ def solve(
         )
 
     with stage("timing"):
-        trajectory = time_knots(setup, path, theta)
+        trajectory = time_knots(setup, path, nlp.theta)
     heard("timing", trajectory)
 
     with stage("verify"):
-        positions = np.array([lm.position for lm in route.visited])
-        report = verify_knots(setup, trajectory, positions, theta, path.transfers)
+        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
     heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
@@ -195,11 +173,11 @@ def solve(
     return Plan(
         setup=setup,
         landmarks=landmarks,
-        visited=route.visited,
-        landmark_thetas=route.landmark_thetas,
+        visited=visited,
+        landmark_thetas=landmark_thetas,
         path=path,
-        knot_ik=optimized.knot_ik,
-        nlp=optimized.nlp,
+        knot_ik=warm,
+        nlp=nlp,
         trajectory=trajectory,
         verification=report,
         timings=timings,
@@ -311,19 +289,6 @@ class PlacementAhead:
     def __exit__(self, *exc: object) -> None:
         self._stopped = True
         self._join()
-
-
-def route_captures(setup: Setup, placement: LandmarkPlacement, tour: bool) -> Route:
-    """The ``path`` stage: the visiting order of the placed captures (a light set's joint-space
-    tour with ``tour``, :func:`~optlight.planning.set_landmarks.tour_order`; else
-    :func:`~optlight.planning.policy.visiting_order`), the great-circle knots through them
-    (:func:`capture_path`) and the per-knot IK along the knots (the NLP's warm start)."""
-    order = tour_order(placement.thetas) if tour else visiting_order(setup, placement)
-    visited = tuple(placement.landmarks[i] for i in order)
-    landmark_thetas = placement.thetas[order]
-    path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
-    warm, failures = knot_ik(setup, path, landmark_thetas)
-    return Route(order, visited, landmark_thetas, path, warm, failures)
 
 
 def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> LightPath:

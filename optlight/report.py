@@ -39,7 +39,7 @@ from optlight.planning.policy import LandmarkPlacement
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.scene import Scene
 from optlight.setup import Setup
-from optlight.stages import OptimizedPath, Route
+from optlight.stages import OptimizedPath
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob
 from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
@@ -390,7 +390,6 @@ class FigureDrafts:
         self.figures: dict[str, Future[bytes]] = {}
         self._setup: Setup | None = None
         self._landmarks: LandmarkSet | None = None
-        self._route: Route | None = None
         self._knots: OptimizedPath | None = None
 
     def __call__(self, stage: str, result: object) -> None:
@@ -403,13 +402,11 @@ class FigureDrafts:
             case LandmarkPlacement():
                 assert self._setup is not None and self._landmarks is not None, "scene and landmarks first"
                 self._draw(landmark_jobs(self._landmarks, self._setup.scene, result.landmarks))
-            case Route():
-                self._route = result
             case OptimizedPath():
                 self._knots = result
             case Trajectory():
-                assert self._setup is not None and self._route is not None and self._knots is not None
-                self._draw(motion_jobs(self._setup, self._route.visited, self._knots.nlp.theta, result))
+                assert self._setup is not None and self._knots is not None, "scene and nlp first"
+                self._draw(motion_jobs(self._setup, self._knots.visited, self._knots.nlp.theta, result))
 
     def _draw(self, jobs: Mapping[str, FigureJob]) -> None:
         self.figures |= {name: self.worker.draw(job) for name, job in jobs.items()}

@@ -1,8 +1,8 @@
-"""The stages of a solve, the typed value each one hands on, and the hook that hears each one finish.
+"""The typed value each stage of a solve hands on, and the hook that hears each stage finish.
 
-:func:`optlight.solve` runs the stages of :data:`STAGES` in order (docs/design.md §6) and, as each
-finishes, calls its listener ``on_stage(stage, result)`` (a :data:`StageListener`) with the stage's
-result:
+:func:`optlight.solve` runs the stages of :data:`optlight.pipeline.STAGES` in order (docs/design.md
+§6) and, as each finishes, calls its listener ``on_stage(stage, result)`` (a :data:`StageListener`)
+with the stage's result:
 
 ========== ===========================================================================
 stage      result
@@ -11,7 +11,7 @@ scene      :class:`~optlight.setup.Setup` (also when the caller passed it built)
 landmarks  :class:`~optlight.planning.landmarks.LandmarkSet`, the landmark search
 placement  :class:`~optlight.planning.policy.LandmarkPlacement`, the captures' joint angles
 path       :class:`Route`: the visiting order, the knots and the per-knot IK
-nlp        :class:`OptimizedPath`: the knots the trajectory NLP chose
+nlp        :class:`OptimizedPath`: the captures and the knots the trajectory NLP chose
 timing     :class:`~optlight.motion.Trajectory`, the timed motion
 verify     :class:`~optlight.verify.VerificationReport`, the independent check
 ========== ===========================================================================
@@ -34,11 +34,8 @@ from optlight.planning.trajectory import TrajectoryNLPResult
 
 Array = NDArray[np.float64]
 
-#: The stages of a solve, in the order they run (each timed in :attr:`optlight.plan.Plan.timings`).
-STAGES = ("scene", "landmarks", "placement", "path", "nlp", "timing", "verify")
-
-#: on_stage(stage, result): called as each stage of :data:`STAGES` finishes, with its result (the
-#: module docstring's table).
+#: on_stage(stage, result): called as each stage of :data:`optlight.pipeline.STAGES` finishes, with
+#: its result (the module docstring's table).
 StageListener = Callable[[str, object], None]
 
 
@@ -59,10 +56,14 @@ class Route:
 
 @dataclass(frozen=True)
 class OptimizedPath:
-    """What the ``nlp`` stage hands on: the ``path`` with the transfers its windows needed (the
-    segments the light leaves the sphere on), the per-knot IK ``knot_ik`` (K, n, rad) it was
-    warm-started at, and the trajectory NLP's result ``nlp`` (its knots ``nlp.theta``)."""
+    """What the ``nlp`` stage hands on: the captures ``visited`` in visiting order and their joint
+    angles ``landmark_thetas`` (M, n, rad) the motion goes through, the ``path`` with the transfers
+    its windows needed (the segments the light leaves the sphere on), the per-knot IK ``knot_ik``
+    (K, n, rad) it was warm-started at, and the trajectory NLP's result ``nlp`` (its knots
+    ``nlp.theta``)."""
 
+    visited: tuple[Landmark, ...]
+    landmark_thetas: Array
     path: LightPath
     knot_ik: Array
     nlp: TrajectoryNLPResult

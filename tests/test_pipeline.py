@@ -16,9 +16,10 @@ from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
 from optlight.motion import Trajectory
+from optlight.pipeline import STAGES
 from optlight.plan import joint_path_length
 from optlight.planning.policy import LandmarkPlacement
-from optlight.stages import STAGES, OptimizedPath, Route
+from optlight.stages import OptimizedPath, Route
 from optlight.verify import verify_trajectory
 
 
@@ -56,7 +57,8 @@ def test_the_listener_hears_every_stage_with_its_result(
     assert all(placement.landmarks[i] is v for i, v in zip(route.order, plan.visited, strict=True))
     np.testing.assert_array_equal(route.landmark_thetas, plan.landmark_thetas)
     np.testing.assert_array_equal(placement.thetas[route.order], plan.landmark_thetas)
-    assert isinstance(optimized, OptimizedPath) and optimized.nlp is plan.nlp and optimized.path is plan.path
+    assert isinstance(optimized, OptimizedPath) and optimized.visited is plan.visited
+    assert optimized.nlp is plan.nlp and optimized.path is plan.path and optimized.knot_ik is plan.knot_ik
     assert results["timing"] is plan.trajectory and results["verify"] is plan.verification
 
 
