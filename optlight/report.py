@@ -85,8 +85,8 @@ class PlanRecord(Protocol):
 def plan_dict(plan: PlanRecord, summary: Mapping[str, Any]) -> dict[str, Any]:
     """What plan.json records of ``plan`` besides the trajectory and the verification (which export
     adds); ``summary`` its key numbers."""
-    setup, nlp, path = plan.setup, plan.nlp, plan.path
-    landmarks, visited = plan.landmarks, plan.visited
+    setup, landmarks, visited, warnings = plan.setup, plan.landmarks, plan.visited, plan.warnings
+    landmark_thetas, path, nlp = plan.landmark_thetas, plan.path, plan.nlp
     problem, robot, spec = setup.problem, setup.robot, setup.problem.robot
     return {
         "problem": problem.to_dict(),
@@ -118,7 +118,7 @@ def plan_dict(plan: PlanRecord, summary: Mapping[str, Any]) -> dict[str, Any]:
                 "time_s": lm.time_s,
                 "theta": theta,
             }
-            for i, (lm, theta) in enumerate(zip(visited, plan.landmark_thetas, strict=True))
+            for i, (lm, theta) in enumerate(zip(visited, landmark_thetas, strict=True))
         ],
         "landmark_search": {
             "mode": landmarks.mode,
@@ -139,14 +139,15 @@ def plan_dict(plan: PlanRecord, summary: Mapping[str, Any]) -> dict[str, Any]:
             "transfers": np.flatnonzero(path.transfers),  # segments off the sphere, in visiting order
         },
         "summary": dict(summary),
-        "warnings": list(plan.warnings),
+        "warnings": list(warnings),
     }
 
 
 def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Sequence[str]) -> str:
     """report.md of ``plan``: what was solved, the key numbers (``summary``), the verification and the
     ``figures`` (PNG file names)."""
-    setup, s, t = plan.setup, summary, plan.timings
+    setup, timings, verification, warnings = plan.setup, plan.timings, plan.verification, plan.warnings
+    s, t = summary, timings
     view = setup.problem.view
     protected = (
         "> **The camera's view is not protected** (`[view] mode = \"off\"`): robot links or the lamp may "
@@ -193,14 +194,14 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         "## Verification",
         "",
         "```",
-        plan.verification.summary(),
+        verification.summary(),
         "```",
         "",
     ]
     if "lightset" in s:
         lines += _lightset_lines(s["lightset"])
-    if plan.warnings:
-        lines += ["## Warnings", "", *(f"- {w}" for w in plan.warnings), ""]
+    if warnings:
+        lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
@@ -315,14 +316,16 @@ def save_results(
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
-    setup, trajectory, visited = plan.setup, plan.trajectory, plan.visited
-    robot, traj_spec = setup.robot, setup.trajectory_spec
+    setup, landmarks, visited, nlp = plan.setup, plan.landmarks, plan.visited, plan.nlp
+    trajectory, verification = plan.trajectory, plan.verification
+    light_directions_camera = plan.light_directions_camera
+    robot = setup.robot
     drawn = {name: png for name, png in (drawn or {}).items() if not png.cancelled()}
     # the landmark jobs only when one is not drawn: making the contact sheet's renders its images
-    missing = not drawn.keys() >= set(_landmark_figure_names(plan.landmarks))
+    missing = not drawn.keys() >= set(_landmark_figure_names(landmarks))
     figures = {
-        **motion_jobs(setup, visited, plan.nlp.theta, trajectory),
-        **(landmark_jobs(plan.landmarks, setup.scene, visited) if missing else {}),
+        **motion_jobs(setup, visited, nlp.theta, trajectory),
+        **(landmark_jobs(landmarks, setup.scene, visited) if missing else {}),
         **(extra_figures or {}),
     }
     sources: dict[str, Callable[[], bytes]] = {name: png.result for name, png in drawn.items()}
@@ -338,6 +341,8 @@ def save_results(
         out.write_text(report_markdown(plan, summary, names))
         return [out]
 
+    traj_spec = setup.trajectory_spec
+
     def joint_trajectory(folder: Path) -> list[Path]:
         out = folder / "joint_trajectory.yaml"
         return [write_joint_trajectory(out, trajectory, robot.joint_names, traj_spec.rate_hz)]
@@ -349,7 +354,7 @@ def save_results(
                 trajectory,
                 settle_s=traj_spec.settle_s,
                 image_pattern=traj_spec.image_pattern,
-                light_directions_camera=plan.light_directions_camera,
+                light_directions_camera=light_directions_camera,
                 light_positions=np.array([lm.position for lm in visited]),
                 joint_names=robot.joint_names,
             )
@@ -365,11 +370,11 @@ def save_results(
     return write_results(
         folder,
         trajectory=trajectory,
-        report=plan.verification,
+        report=verification,
         plan_dict=plan_dict(plan, summary),
         joint_names=robot.joint_names,
-        light_directions_camera=plan.light_directions_camera,
-        image_pattern=traj_spec.image_pattern,
+        light_directions_camera=light_directions_camera,
+        image_pattern=setup.trajectory_spec.image_pattern,
         figures=sources,
         writers=writers,
         overwrite=overwrite,
