@@ -126,6 +126,7 @@ def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> 
     np.testing.assert_allclose(back.sample(t)[0], plan.trajectory.sample(t)[0], atol=2e-3)
     report = (folder / "report.md").read_text()
     assert "verification | passed" in report and "![path](path.png)" in report
+    assert "## Files and frames" in report and "x to the right of the image, y towards its top" in report
 
 
 def test_a_compressed_trajectory_is_refused(plan: optlight.Plan, tmp_path: Path) -> None:
