@@ -35,6 +35,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.capture.folder import FolderCamera
     from optlight.capture.mitsuba import MitsubaCamera
     from optlight.cell import CellResult, design_cell
+    from optlight.motion import Trajectory
     from optlight.objectives import Objective
     from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
@@ -42,8 +43,9 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
-    from optlight.planning.timing import Trajectory, time_parameterize
+    from optlight.planning.timing import time_parameterize
     from optlight.planning.waypoints import Waypoints, controller_waypoints
+    from optlight.report import FigureDrafts
     from optlight.robot import Dynamics, IKResult, Lamp, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
@@ -74,7 +76,7 @@ _LAZY = {
     "generalized_ik": "optlight.robot",
     "ReachabilityMap": "optlight.planning.reach",
     "reachability_map": "optlight.planning.reach",
-    "Trajectory": "optlight.planning.timing",
+    "Trajectory": "optlight.motion",
     "time_parameterize": "optlight.planning.timing",
     "Waypoints": "optlight.planning.waypoints",
     "controller_waypoints": "optlight.planning.waypoints",
@@ -88,6 +90,7 @@ _LAZY = {
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
     "FigureWorker": "optlight.viz.drawing",
+    "FigureDrafts": "optlight.report",
     "save_gray_png": "optlight.viz.images",
     "acquire": "optlight.acquisition",
     "Acquisition": "optlight.acquisition",

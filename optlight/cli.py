@@ -119,6 +119,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _import(SOLVE_MODULES)
         from optlight.pipeline import STAGES, solve
         from optlight.preflight import preflight
+        from optlight.report import FigureDrafts
 
         with console.status("building the scene, objectives, robot and environment"):
             setup = preflight(problem)  # built once: the solve below takes it as it is
@@ -138,8 +139,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
                 bars.start_task(tasks[stage])
                 bars.update(tasks[stage], completed=done, total=total)
 
+            drafts = FigureDrafts(worker)  # the figures drawn as the stages finish
             with warnings.catch_warnings(record=True):
-                plan = solve(setup, progress=progress, worker=worker)
+                plan = solve(setup, progress=progress, on_stage=drafts)
         interrupts.check()
         table = Table(title=f"optlight solve {problem.name}", show_header=False)
         for key, value in _summary_rows(plan.summary()):
@@ -151,7 +153,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         if not plan.verification.passed:
             console.print(escape(plan.verification.summary()))
         with console.status(f"writing {out}/ (figures, preview, report)"):
-            plan.save(out, overwrite=args.force, worker=worker)  # refused (VerificationError) unless verified
+            # refused (VerificationError) unless verified
+            plan.save(out, overwrite=args.force, worker=worker, drawn=drafts.figures)
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
         plan.preview().show()

@@ -75,7 +75,7 @@ from numpy.typing import ArrayLike, NDArray
 from optlight import interrupts
 from optlight.errors import UsageError, VerificationError
 from optlight.jsondata import json_safe
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 from optlight.planning.waypoints import Waypoints
 from optlight.spec import image_names
 from optlight.verify import VerificationReport

@@ -1,10 +1,11 @@
 """The whole job: ``plan = optlight.solve(problem)``, then ``plan.save(folder)``.
 
-A straight line of stages, each taking built objects and returning a typed result (each timed in
-``Plan.timings``):
+A straight line of stages, each taking built objects and returning a typed result, each timed in
+``Plan.timings`` and heard by the caller's ``on_stage`` listener as it finishes (:mod:`optlight.stages`;
+the solve draws nothing and writes nothing):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
-   (no stage of the solve when the caller passes it built, as the command line does in its checks);
+   (not timed when the caller passes it built, as the command line does in its checks; still heard);
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
    on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
    designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-
@@ -37,7 +38,6 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
 from optlight.errors import SolverError
+from optlight.motion import Trajectory
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
@@ -66,15 +67,14 @@ from optlight.planning.set_landmarks import (
     set_summary,
     tour_order,
 )
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
 from optlight.planning.waypoints import Waypoints, controller_waypoints
-from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem, check_trajectory_samples
+from optlight.stages import OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
-from optlight.viz.drawing import FigureWorker
 
 Array = NDArray[np.float64]
 
@@ -88,18 +88,20 @@ def solve(
     problem: Problem | Setup | str | Path,
     *,
     progress: Progress | None = None,
-    worker: FigureWorker | None = None,
+    on_stage: StageListener | None = None,
 ) -> Plan:
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
-    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the figures of the
-    results folder are drawn there while the rest is solved (:attr:`Plan.figures`): the landmark
-    figures once the captures are placed, the motion's once it is timed.
+    end to end. ``on_stage(stage, result)`` hears each stage finish, with its typed result
+    (:mod:`optlight.stages`): the command line subscribes the figure worker there
+    (:class:`~optlight.report.FigureDrafts`), which draws the results folder's figures while the rest
+    is solved.
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
     shown); :meth:`Plan.save` refuses to export it.
     """
     notify = progress or (lambda stage, done, total: None)
+    heard = on_stage or (lambda stage, result: None)
     timings: dict[str, float] = {}
     t_total = time.perf_counter()
 
@@ -111,11 +113,12 @@ def solve(
         timings[name] = time.perf_counter() - start
         notify(name, 1, 1)
 
-    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): no stage here
+    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): not timed here
         setup = problem
     else:
         with stage("scene"):
             setup = Setup.from_problem(problem)
+    heard("scene", setup)
 
     start = time.perf_counter()
     reacher = Reacher(setup)
@@ -124,16 +127,14 @@ def solve(
             setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
         )
         timings["landmarks"] = time.perf_counter() - start
+        heard("landmarks", landmarks)
 
         with stage("placement"):  # what is left of it once the search is done
             if design is None:
                 placement = ahead.placement(captures)
             else:
                 placement = place_captures(setup, captures, design, reacher)
-    figures: dict[str, Future[bytes]] = {}
-    if worker is not None:  # drawn there while the motion is planned, with the captures placed
-        jobs = landmark_jobs(landmarks, setup.scene, placement.landmarks)
-        figures = {n: worker.draw(job) for n, job in jobs.items()}
+    heard("placement", placement)
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
@@ -143,6 +144,7 @@ def solve(
         landmark_thetas = placement.thetas[order]
         path = capture_path(setup, positions, landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
+    heard("path", Route(order, visited, landmark_thetas, path, warm, failures))
     lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures.any():
         notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
@@ -151,6 +153,7 @@ def solve(
         path, warm, nlp = optimize_path(
             setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
         )
+    heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -164,12 +167,12 @@ def solve(
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory
         check_trajectory_samples(setup.problem, setup.robot.n, trajectory.duration, dwell)
-    if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
-        figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
+    heard("timing", trajectory)
 
     with stage("verify"):
         waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, setup.trajectory_spec.rate_hz))
         report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers, waypoints)
+    heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -188,7 +191,6 @@ def solve(
         warnings=tuple(notes),
         lightset=lightset,
         reach=design.reach if design is not None else None,
-        figures=figures,
     )
 
 

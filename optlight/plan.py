@@ -18,11 +18,11 @@ from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
+from optlight.motion import Trajectory
 from optlight.planning.jerk import rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
-from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
 from optlight.planning.waypoints import Waypoints
 from optlight.report import RESULTS_DPI, save_results
@@ -52,8 +52,7 @@ class Plan:
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
     None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
-    for other plans); ``figures`` the results folder's figures a worker process drew while the rest
-    was solved (``solve(..., worker=...)``), by file stem, which :meth:`save` takes as they are.
+    for other plans).
     """
 
     setup: Setup
@@ -70,7 +69,6 @@ class Plan:
     warnings: tuple[str, ...] = field(default=())
     lightset: dict[str, Any] | None = None
     reach: ReachabilityMap | None = None
-    figures: Mapping[str, Future[bytes]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def problem(self) -> Problem:
@@ -185,12 +183,14 @@ class Plan:
         overwrite: bool = False,
         preview: bool = True,
         worker: FigureWorker | None = None,
+        drawn: Mapping[str, Future[bytes]] | None = None,
     ) -> list[Path]:
         """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
         plan failed verification. ``folder`` must be new, empty or, with ``overwrite``, an earlier
         optlight output (the output policy of :mod:`optlight.export`). ``worker`` draws the figures
         in its process while this one writes the rest (:class:`~optlight.viz.drawing.FigureWorker`;
-        the same files). Returns the paths written."""
+        the same files); ``drawn`` are the figures it drew while the plan was solved, by file stem
+        (:attr:`optlight.report.FigureDrafts.figures`), taken as they are. Returns the paths written."""
         summary, writers = self.summary(), []
         figures: dict[str, FigureJob] = {}
         if self.lightset is not None:
@@ -203,25 +203,14 @@ class Plan:
             writers = [files_writer(capture.files, PHOTOMETRIC_STEREO_FOLDER)]
         return save_results(
             folder,
-            setup=self.setup,
-            landmarks=self.landmarks,
-            visited=self.visited,
-            landmark_thetas=self.landmark_thetas,
-            path=self.path,
-            nlp=self.nlp,
-            trajectory=self.trajectory,
-            waypoints=self.waypoints,
-            verification=self.verification,
+            self,
             summary=summary,
-            timings=self.timings,
-            warnings=self.warnings,
-            light_directions_camera=self.light_directions_camera,
             preview=(lambda path: self.preview().save_html(path)) if preview else None,
             overwrite=overwrite,
             extra_figures=figures,
             extra_writers=writers,
             worker=worker,
-            drawn=self.figures,
+            drawn=drawn,
         )
 
     def model_capture(self) -> ModelCapture:

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from optlight.errors import OptlightError, UsageError
 from optlight.export import read_joint_trajectory
 from optlight.jsondata import json_safe
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 from optlight.robot import Dynamics, load_robot
 from optlight.robot.kinematics import joint_axis
 from optlight.setup import lamp_of

@@ -61,7 +61,7 @@ from scipy.spatial import cKDTree
 from optlight.errors import VerificationError
 from optlight.geometry import LightSphere, h_residual
 from optlight.jsondata import json_safe
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 
 Array = NDArray[np.float64]
 LightPose = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]

@@ -17,11 +17,12 @@ from conftest import reduced_problem
 import optlight
 from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
+from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark
 from optlight.planning.nlp import knot_bounds, run, tangent_basis
 from optlight.planning.placement import CLEARANCE_TOL, NEAR_STEP, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.policy import Reacher, place_landmarks
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
 from optlight.spec import Problem

@@ -25,7 +25,8 @@ from optlight.export import (
     write_results,
 )
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.motion import Trajectory
+from optlight.planning.timing import time_parameterize
 from optlight.planning.waypoints import controller_waypoints
 from optlight.scene.camera import Camera
 from optlight.spec import image_names

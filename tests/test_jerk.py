@@ -10,13 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 
+from optlight.planning.chord import chord_path, spline_position_range
 from optlight.planning.jerk import (
     JerkLimitedMotion,
     derivative_maxima,
     jerk_limited_timing,
     rest_to_rest_duration,
 )
-from optlight.planning.timing import chord_path, spline_position_range, time_parameterize
+from optlight.planning.timing import time_parameterize
 
 VMAX = np.array([1.0, 1.5, 0.8])
 AMAX = np.array([3.0, 2.0, 4.0])

@@ -15,9 +15,12 @@ import optlight
 from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
+from optlight.motion import Trajectory
+from optlight.pipeline import STAGES
 from optlight.plan import joint_path_length
 from optlight.planning.jerk import rest_to_rest_duration
-from optlight.planning.timing import Trajectory
+from optlight.planning.policy import LandmarkPlacement
+from optlight.stages import OptimizedPath, Route
 from optlight.verify import verify_trajectory
 
 
@@ -28,8 +31,36 @@ def small_problem(**overrides: dict) -> optlight.Problem:
 
 
 @pytest.fixture(scope="module")
-def plan() -> optlight.Plan:
-    return optlight.solve(small_problem())
+def solved() -> tuple[optlight.Plan, list[tuple[str, object]]]:
+    """The small problem's plan, and what its stage listener heard: (stage, result) in order."""
+    heard: list[tuple[str, object]] = []
+    plan = optlight.solve(small_problem(), on_stage=lambda stage, result: heard.append((stage, result)))
+    return plan, heard
+
+
+@pytest.fixture(scope="module")
+def plan(solved: tuple[optlight.Plan, list[tuple[str, object]]]) -> optlight.Plan:
+    return solved[0]
+
+
+def test_the_listener_hears_every_stage_with_its_result(
+    solved: tuple[optlight.Plan, list[tuple[str, object]]],
+) -> None:
+    """Each stage, in order, once, with the typed result the plan is made of (optlight.stages)."""
+    plan, heard = solved
+    assert [stage for stage, _ in heard] == list(STAGES)
+    results = dict(heard)
+    assert results["scene"] is plan.setup and results["landmarks"] is plan.landmarks
+    placement = results["placement"]
+    route, optimized = results["path"], results["nlp"]
+    assert isinstance(placement, LandmarkPlacement) and isinstance(route, Route)
+    assert route.visited is plan.visited
+    assert all(placement.landmarks[i] is v for i, v in zip(route.order, plan.visited, strict=True))
+    np.testing.assert_array_equal(route.landmark_thetas, plan.landmark_thetas)
+    np.testing.assert_array_equal(placement.thetas[route.order], plan.landmark_thetas)
+    assert isinstance(optimized, OptimizedPath) and optimized.visited is plan.visited
+    assert optimized.nlp is plan.nlp and optimized.path is plan.path and optimized.knot_ik is plan.knot_ik
+    assert results["timing"] is plan.trajectory and results["verify"] is plan.verification
 
 
 def test_plan_meets_the_light_constraints_and_limits(plan: optlight.Plan) -> None:

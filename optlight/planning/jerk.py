@@ -8,7 +8,7 @@ jerk-limited profile of its path parameter, computed by ruckig (its free version
 which is all a rest-to-rest segment needs; docs/design.md §7).
 
 **Path.** The same geometric path as TOPPRA's: the not-a-knot cubic spline q(s) through the
-waypoints over the cumulative chord length s ∈ [0, L] (:func:`optlight.planning.timing.chord_path`).
+waypoints over the cumulative chord length s ∈ [0, L] (:func:`optlight.planning.chord.chord_path`).
 It is C²: q″ is continuous, q‴ is constant between knots.
 
 **Profile.** s(t) rest to rest from 0 to L with 0 ≤ ṡ ≤ V, |s̈| ≤ A, |s⃛| ≤ J (ruckig's time-optimal
@@ -50,7 +50,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from optlight.errors import SolverError
-from optlight.planning.timing import Trajectory, as_bounds, assemble_trajectory, chord_path, positive_limits
+from optlight.motion import Trajectory, assemble_trajectory, positive_limits
+from optlight.planning.chord import as_bounds, chord_path
 
 Array = NDArray[np.float64]
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 
 Array = NDArray[np.float64]
 

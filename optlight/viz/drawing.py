@@ -5,9 +5,11 @@ its (picklable) arguments and the PNG's resolution. :meth:`FigureJob.png` draws 
 a :class:`FigureWorker` draws it in a process of its own. Drawing is most of the time it takes to
 write a plan's results (the six figures of the default problem ~1.5 s, the rest ~1 s), and it needs
 only the plan's numbers, so the command line starts a worker before its own heavy imports (the
-worker's imports take the core those and the problem's build leave idle) and hands it the figures as soon as their numbers exist (``solve(..., worker=)``): the
-landmark figures once the captures are placed, the trajectory and path figures once the motion is
-timed, drawn while it is verified and the exports and the preview are written (``Plan.save``).
+worker's imports take the core those and the problem's build leave idle) and hands it the figures
+as soon as their numbers exist (:class:`optlight.report.FigureDrafts`, listening to the solve's
+stages): the landmark figures once the captures are placed, the trajectory and path figures once the
+motion is timed, drawn while it is verified and the exports and the preview are written
+(``Plan.save``).
 
 The worker is spawned, not forked: a fresh interpreter inherits none of this process's threads
 (Embree's, the ray caster's pool) or locks. It ignores Ctrl-C from its first instant, which this

@@ -124,7 +124,7 @@ class RobotLike(Protocol):
 
 
 class TrajectoryLike(Protocol):
-    """What the preview reads from a timed trajectory (:class:`optlight.planning.timing.Trajectory`)."""
+    """What the preview reads from a timed trajectory (:class:`optlight.motion.Trajectory`)."""
 
     @property
     def duration(self) -> float: ...

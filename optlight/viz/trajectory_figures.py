@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optlight.geometry import LightSphere
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 from optlight.viz.layout import set_margins
 
 if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
