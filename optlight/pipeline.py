@@ -68,6 +68,7 @@ from optlight.planning.set_landmarks import (
     tour_order,
 )
 from optlight.planning.timing import time_parameterize
+from optlight.planning.torque_scaling import within_torque_limits
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.setup import Setup
@@ -428,7 +429,9 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits."""
+    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits; the whole
+    motion slowed where its joint torques would exceed the robot's limits
+    (:func:`~optlight.planning.torque_scaling.within_torque_limits`)."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
     retreat = (
@@ -437,18 +440,24 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
         else None
     )
     segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
-    timed: Callable[..., Trajectory] = (
-        partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
-        if spec.timing == "jerk_limited"
-        else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
-    )
-    return timed(
-        spec.dwell_s,
-        joint_names=setup.robot.joint_names,
-        approach=approach,
-        retreat=retreat,
-        position_bounds=(limits.lower, limits.upper),
-    )
+
+    def timed(scale: float) -> Trajectory:
+        """The motion timed with the limits scaled for the torques (planning/torque_scaling.py)."""
+        v, a, j = np.sqrt(scale) * limits.velocity, scale * limits.acceleration, scale**1.5 * limits.jerk
+        timing: Callable[..., Trajectory] = (
+            partial(jerk_limited_timing, segments, v, a, j)
+            if spec.timing == "jerk_limited"
+            else partial(time_parameterize, segments, v, a)
+        )
+        return timing(
+            spec.dwell_s,
+            joint_names=setup.robot.joint_names,
+            approach=approach,
+            retreat=retreat,
+            position_bounds=(limits.lower, limits.upper),
+        )
+
+    return within_torque_limits(timed, setup.dynamics)
 
 
 def verify_knots(

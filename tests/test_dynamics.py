@@ -119,3 +119,39 @@ def test_a_lamp_too_heavy_for_the_arm_is_refused_naming_the_joint(tmp_path: Path
     light = optlight.solve(reduced_problem(camera_px=96, landmarks={"count": 3}))
     assert light.verification.checks["torque"].passed
     assert 0.0 < max(light.summary()["torque_peak_fraction"].values()) < 1.0
+
+
+def test_a_motion_too_fast_for_the_torques_is_slowed_within_the_limits() -> None:
+    """A wide swing timed with ten times the Panda's acceleration and jerk limits needs more torque
+    than the joints have; re-timed, its torques (RNEA at 1 kHz, the lamp as a plain point mass added
+    to an unloaded model) stay within the published limits and the motion takes longer."""
+    from optlight.planning.jerk import jerk_limited_timing
+    from optlight.planning.torque_scaling import within_torque_limits
+
+    robot = load_robot("panda")
+    lamp = dataclasses.replace(LAMP, radius_m=1e-6, length_m=1e-6)  # a point mass, as written below
+    dynamics = Dynamics(robot, lamp)
+    start = robot.theta_ref.copy()
+    start[1], start[3] = 0.3, -1.2  # the arm stretched out: large inertia about the first joint
+    end = start.copy()
+    end[0] += 2.5
+    v, a, j = robot.velocity_limit, 10 * np.full(robot.n, 10.0), 10 * np.full(robot.n, 5000.0)
+
+    def timed(scale: float) -> optlight.Trajectory:
+        return jerk_limited_timing([np.vstack([start, end])], np.sqrt(scale) * v, scale * a, scale**1.5 * j, 0.0)
+
+    def peak_ratio(trajectory: optlight.Trajectory) -> float:
+        model = robot.model.copy()
+        flange = model.frames[robot.flange_frame_id]
+        com = flange.placement.act(np.asarray(lamp.com_m))
+        model.inertias[flange.parentJoint] += pin.Inertia(lamp.mass_kg, com, np.zeros((3, 3)))
+        data = model.createData()
+        q, qd, qdd = trajectory.sample(trajectory.sample_times(1000.0))
+        tau = np.array([pin.rnea(model, data, robot.to_pin(q[k]), qd[k], qdd[k]) for k in range(len(q))])
+        return float(np.max(np.abs(tau) / robot.torque_limit))
+
+    fast = timed(1.0)
+    assert peak_ratio(fast) > 1.2
+    slowed = within_torque_limits(timed, dynamics)
+    assert peak_ratio(slowed) <= 1.0
+    assert slowed.duration > fast.duration
