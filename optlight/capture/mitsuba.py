@@ -120,18 +120,43 @@ class MitsubaCamera:
         }
 
     def _bsdf(self, reflectance: dict[str, Any]) -> dict[str, Any]:
+        """The world's BSDF with the diffuse ``reflectance`` (a texture dict; a constant one for
+        roughplastic, see :meth:`_vertex_bsdf`)."""
         w = self.world
         if w.bsdf == "lambertian":
             return {"type": "diffuse", "reflectance": reflectance}
         if w.bsdf == "roughplastic":
-            return {
-                "type": "roughplastic",
-                "distribution": "ggx",
-                "alpha": w.roughness,
-                "diffuse_reflectance": reflectance,
-                "specular_reflectance": {"type": "rgb", "value": [w.specular] * 3},
-            }
+            return self._roughplastic(reflectance)
         return {"type": "principled", "base_color": reflectance, "roughness": w.roughness, "specular": w.specular}
+
+    def _roughplastic(self, reflectance: dict[str, Any]) -> dict[str, Any]:
+        w = self.world
+        return {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": w.roughness,
+            "diffuse_reflectance": reflectance,
+            "specular_reflectance": {"type": "rgb", "value": [w.specular] * 3},
+        }
+
+    def _vertex_bsdf(self, albedo: Array) -> dict[str, Any]:
+        """The world's BSDF with the per-vertex diffuse ``albedo`` (N,) of the mesh attributes
+        ``vertex_color`` (3 channels) and ``vertex_weight`` (albedo / its largest value, 1 channel).
+
+        Mitsuba's roughplastic takes no vertex colours: it weighs its specular and diffuse samples by
+        the reflectance texture's mean, which a mesh attribute does not have. Its BSDF (the linear
+        diffuse term, ``nonlinear`` false) is f_ρ = f_0 + ρ·(f_1 − f_0), so with ρ_max the largest
+        albedo it is the blend (1 − ρ/ρ_max)·f_0 + (ρ/ρ_max)·f_ρmax of two roughplastics of constant
+        reflectance, a ``blendbsdf`` weighted by ``vertex_weight``."""
+        if self.world.bsdf != "roughplastic":
+            return self._bsdf({"type": "mesh_attribute", "name": "vertex_color"})
+        top = max(float(np.max(albedo, initial=0.0)), 1e-12)
+        return {
+            "type": "blendbsdf",
+            "weight": {"type": "mesh_attribute", "name": "vertex_weight"},
+            "bsdf_0": self._roughplastic({"type": "uniform", "value": 0.0}),
+            "bsdf_1": self._roughplastic({"type": "uniform", "value": top}),
+        }
 
     def _shape_dict(self) -> Any:
         """The object: Mitsuba's exact sphere for an untextured sphere object, else the mesh with
@@ -149,16 +174,18 @@ class MitsubaCamera:
         mesh = obj.mesh
         vector = (lambda x: x) if mi.variant().startswith("scalar") else mi.Float
         index = (lambda x: x) if mi.variant().startswith("scalar") else mi.UInt32
+        albedo = world_albedo(mesh.vertices, obj.albedo, w)
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict(self._bsdf({"type": "mesh_attribute", "name": "vertex_color"}))
+        props["bsdf"] = mi.load_dict(self._vertex_bsdf(albedo))
         shape = mi.Mesh("object", len(mesh.vertices), len(mesh.faces), props, has_vertex_normals=True)
         params = mi.traverse(shape)
         params["vertex_positions"] = vector(np.asarray(mesh.vertices, np.float32).ravel())
         params["faces"] = index(np.asarray(mesh.faces, np.uint32).ravel())
         params["vertex_normals"] = vector(np.asarray(mesh.vertex_normals, np.float32).ravel())
         params.update()
-        albedo = world_albedo(mesh.vertices, obj.albedo, w)
         shape.add_attribute("vertex_color", 3, vector(np.repeat(albedo, 3).astype(np.float32)))
+        weight = albedo / max(float(np.max(albedo, initial=0.0)), 1e-12)
+        shape.add_attribute("vertex_weight", 1, vector(weight.astype(np.float32)))
         return shape
 
     def _emitter(self, real: Array) -> dict[str, Any]:
