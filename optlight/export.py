@@ -40,10 +40,14 @@ from __future__ import annotations
 
 import csv
 import datetime
+import errno
+import hashlib
 import importlib.metadata
 import json
 import os
 import shutil
+import socket
+import sys
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -56,7 +60,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from optlight import interrupts
-from optlight.errors import UsageError, VerificationError
+from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
 from optlight.spec import image_names
@@ -72,6 +76,14 @@ RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
 MANIFEST = ".optlight-manifest.json"
 #: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
 STAGING_PREFIX = ".optlight-staging-"
+#: Prefix of the name of an output's lock (:func:`lock_output`) in Linux's abstract socket namespace.
+LOCK_PREFIX = "optlight-output-"
+#: What a failed write's errno means, said before the system's own words.
+WRITE_FAILURES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EFBIG: "a file is larger than this system lets a process write",
+}
 
 
 def lp_direction(d_camera: ArrayLike) -> Array:
@@ -389,9 +401,20 @@ def check_output_folder(
     caller passes to allow replacing an earlier output. Raises :class:`UsageError` for an existing
     file or broken link, a non-empty folder without a valid manifest, an earlier output without
     ``overwrite``, and a location where nothing can be written (tried by creating and removing a
-    staging folder there). Writes nothing that stays.
+    staging folder there); :class:`OutputError` when another run is writing the folder. Takes the
+    folder's lock (:func:`lock_output`), released when the output is in place or a check fails.
+    Writes nothing that stays.
     """
     path = Path(folder)
+    lock_output(path)
+    try:
+        return _check_output_folder(path, overwrite, option, force)
+    except BaseException:
+        unlock_output(path)
+        raise
+
+
+def _check_output_folder(path: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
     if path.is_symlink() and not path.exists():
         raise UsageError(option, f"{path} is a broken symbolic link; give a new or empty folder")
     if not path.exists():
@@ -438,12 +461,14 @@ def write_folder(
     (it returns their paths), following the output policy; returns the paths in ``folder``.
 
     The staging folder is removed when ``write`` raises or Ctrl-C arrives before the final renames;
-    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises, and
+    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises,
     :class:`UsageError` (nothing changed) when a file to write exists in the folder without being
-    listed in its manifest (it appeared after the check).
+    listed in its manifest (it appeared after the check), and :class:`OutputError` naming the
+    folder and the cause when the system refuses a write (a full disk, a file size limit).
     """
     target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
     staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
+    moving = False
     try:
         with interrupts.deferred():  # created, then removed by the finally below: never left behind
             staging.mkdir()
@@ -454,9 +479,13 @@ def write_folder(
         )
         interrupts.check()  # an interrupt a library swallowed while writing
         with interrupts.deferred():
+            moving = True
             _move_into_place(staging, target, names, option)
+    except OSError as e:
+        raise _write_error(target.path, e, staging, partial=moving and target.exists) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
+        unlock_output(target.path)
     return [target.path / f for f in files]
 
 
@@ -464,8 +493,19 @@ def check_output_file(
     path: str | Path, *, overwrite: bool = False, option: str = "file", force: str = "overwrite=True"
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
-    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`."""
+    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`,
+    and :class:`OutputError` when another run is writing the file. Takes the file's lock
+    (:func:`lock_output`), released when it is in place or a check fails."""
     out = Path(path)
+    lock_output(out)
+    try:
+        return _check_output_file(out, overwrite, option, force)
+    except BaseException:
+        unlock_output(out)
+        raise
+
+
+def _check_output_file(out: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
     if out.is_dir():
         raise UsageError(option, f"{out} is a folder; give the path of the file to write")
     exists = out.exists() or out.is_symlink()
@@ -495,9 +535,68 @@ def write_file(
         with interrupts.deferred():
             out.parent.mkdir(parents=True, exist_ok=True)
             os.replace(temporary, out)
+    except OSError as e:
+        raise _write_error(out, e, temporary) from None
     finally:
         temporary.unlink(missing_ok=True)
+        unlock_output(out)
     return out
+
+
+_locks: dict[str, socket.socket] = {}
+
+
+def lock_output(path: str | Path) -> None:
+    """Hold the lock of writing the output ``path`` until :func:`unlock_output` or the end of this
+    process; raises :class:`OutputError` when another process holds it. Taken by
+    :func:`check_output_folder` and :func:`check_output_file` (so a second run into the same
+    ``--out`` is refused before it starts working) and released when the output is in place.
+
+    The lock is a Unix socket bound to a name in Linux's abstract namespace made of a hash of the
+    resolved path: the bind fails while another process holds the name, and the kernel frees it
+    when its process ends, whatever ends it (a normal exit, ``os._exit``, a signal), so it leaves no
+    file anywhere; a lock file beside the output would stay in the user's folder after every run
+    that ended before removing it. Taken again by the process that holds it, it is held once.
+    Other systems have no abstract namespace: there nothing is locked."""
+    if not sys.platform.startswith("linux"):
+        return
+    key = str(Path(path).resolve())
+    if key in _locks:
+        return
+    name = LOCK_PREFIX + hashlib.sha256(key.encode()).hexdigest()[:32]
+    lock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        lock.bind("\0" + name)
+    except OSError as e:
+        lock.close()
+        if e.errno != errno.EADDRINUSE:
+            raise
+        raise OutputError(
+            f"another optlight run is writing {path}; wait for it to end or give another folder"
+        ) from None
+    _locks[key] = lock
+
+
+def unlock_output(path: str | Path) -> None:
+    """Release the lock :func:`lock_output` took on ``path`` (nothing when this process holds none)."""
+    lock = _locks.pop(str(Path(path).resolve()), None)
+    if lock is not None:
+        lock.close()
+
+
+def _write_error(path: Path, error: OSError, staging: Path, partial: bool = False) -> OutputError:
+    """The one-line error for ``error``, met while writing the output ``path`` through ``staging``
+    (the staging folder or temporary file): the folder, the cause, the file it was writing, and
+    whether ``path`` may hold ``partial`` output (files renamed into an existing folder before it)."""
+    cause = error.strerror or str(error)
+    if error.errno in WRITE_FAILURES:
+        cause = f"{WRITE_FAILURES[error.errno]} ({cause})"
+    if error.filename:
+        name = Path(os.fsdecode(error.filename))
+        where = name.relative_to(staging) if name.is_relative_to(staging) and name != staging else name
+        cause += f" at {where}"
+    done = "some of its files may be the new output's" if partial else "nothing was written"
+    return OutputError(f"cannot write {path}: {cause}; {done}")
 
 
 def _existing_ancestor(path: Path, option: str) -> Path:
