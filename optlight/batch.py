@@ -69,6 +69,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from optlight import locks
 from optlight.errors import OptlightError, ProblemError, UsageError
 from optlight.export import MANIFEST, check_output_folder, write_folder
 from optlight.jsondata import json_safe
@@ -83,6 +84,8 @@ if TYPE_CHECKING:
 SPEC_KEYS = ("description", "problem", "preview", "grid", "rows")
 #: Seconds to wait for a remote scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+#: The part of :data:`CONNECT_TIMEOUT_S` spent trying to connect, before the scheduler must answer.
+CONNECT_SHARE = 0.8
 #: The numbers of a solve copied into the results table: record key -> Plan.summary() key.
 METRICS = {
     "landmarks": "landmarks",
@@ -507,6 +510,50 @@ def default_workers() -> int:
     return usable_cores()
 
 
+def check_scheduler(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """Ask the server at ``address`` who it is (Dask's handshake, then its ``identity``) within
+    ``timeout_s`` seconds in all; :class:`SchedulerError` unless a Dask scheduler answers.
+
+    Dask's client waits for the handshake's answer without a time limit (a server that accepts and
+    says nothing holds it for ever) and reads the first 8 bytes any other server sends as a message
+    length (an allocation of exabytes). The question is asked from a thread of its own, in an event
+    loop of its own, so that it also works where the caller runs one (a notebook)."""
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect
+
+    async def identity() -> object:
+        # connection attempts give up (OSError) before the whole question does: a server that takes
+        # the connection and then says nothing is told apart from one that refuses it
+        comm = await connect(address, timeout=CONNECT_SHARE * timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def ask() -> object:
+        return asyncio.run(asyncio.wait_for(identity(), timeout_s))
+
+    unreachable = (
+        f"cannot reach the Dask scheduler at {address!r} within {timeout_s:g} s ({{}}); start one with "
+        "`dask scheduler` and its workers with `dask worker ADDRESS`, or leave --scheduler out for a local cluster"
+    )
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            reply = pool.submit(ask).result()
+        except TimeoutError:
+            raise SchedulerError(f"no answer from {address} within {timeout_s:g} s: not a Dask scheduler") from None
+        except (OSError, ValueError, TypeError) as e:
+            raise SchedulerError(unreachable.format(" ".join(str(e).split()) or type(e).__name__)) from None
+        except Exception:  # what it sent is not Dask's protocol (a MemoryError: garbage read as a length)
+            raise SchedulerError(f"{address} is not a Dask scheduler (what it sent is not Dask's protocol)") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        kind = reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+        raise SchedulerError(f"{address} is not a Dask scheduler (it says it is a {kind})")
+
+
 @contextmanager
 def dask_client(
     scheduler: str | None = None, workers: int | None = None, *, timeout_s: float | None = None
@@ -514,8 +561,9 @@ def dask_client(
     """A Dask client: of the remote scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or of a
     :class:`~distributed.LocalCluster` of ``workers`` single-threaded processes (default: one per
     core) on 127.0.0.1 with no dashboard. The client and the local cluster are closed on exit, whatever
-    happens. An unreachable scheduler is a :class:`SchedulerError` after ``timeout_s`` seconds
-    (default :data:`CONNECT_TIMEOUT_S`)."""
+    happens. An unreachable scheduler, a server that is not a Dask scheduler and one that does not
+    answer are a :class:`SchedulerError` within ``timeout_s`` seconds (default
+    :data:`CONNECT_TIMEOUT_S`; :func:`check_scheduler`)."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -549,6 +597,7 @@ def dask_client(
             )
             client = Client(cluster)
         else:
+            check_scheduler(scheduler, timeout_s)
             try:
                 client = Client(scheduler, timeout=timeout_s)
             except (OSError, TimeoutError, ValueError, TypeError) as e:
@@ -670,7 +719,9 @@ def run_batch(
 def check_batch_folder(out: Path, option: str = "out") -> bool:
     """Whether ``out`` holds an earlier batch (its :data:`BATCH_MARKER`), which a run resumes; else it
     must be a new or empty folder (:func:`optlight.export.check_output_folder`): optlight never writes
-    among files it did not write. Raises :class:`UsageError` (``option`` names the folder) otherwise."""
+    among files it did not write. Raises :class:`UsageError` (``option`` names the folder) otherwise,
+    and :class:`~optlight.errors.OutputError` when another run is writing it (:mod:`optlight.locks`)."""
+    locks.claim(out)
     if (out / BATCH_MARKER).is_file():
         return True
     if out.is_dir() and any(out.iterdir()):

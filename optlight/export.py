@@ -41,13 +41,10 @@ from __future__ import annotations
 import csv
 import datetime
 import errno
-import hashlib
 import importlib.metadata
 import json
 import os
 import shutil
-import socket
-import sys
 import uuid
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -59,7 +56,7 @@ import orjson
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from optlight import interrupts
+from optlight import interrupts, locks
 from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.planning.timing import Trajectory
@@ -76,8 +73,6 @@ RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
 MANIFEST = ".optlight-manifest.json"
 #: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
 STAGING_PREFIX = ".optlight-staging-"
-#: Prefix of the name of an output's lock (:func:`lock_output`) in Linux's abstract socket namespace.
-LOCK_PREFIX = "optlight-output-"
 #: What a failed write's errno means, said before the system's own words.
 WRITE_FAILURES = {
     errno.ENOSPC: "the disk is full",
@@ -401,17 +396,15 @@ def check_output_folder(
     caller passes to allow replacing an earlier output. Raises :class:`UsageError` for an existing
     file or broken link, a non-empty folder without a valid manifest, an earlier output without
     ``overwrite``, and a location where nothing can be written (tried by creating and removing a
-    staging folder there); :class:`OutputError` when another run is writing the folder. Takes the
-    folder's lock (:func:`lock_output`), released when the output is in place or a check fails.
-    Writes nothing that stays.
+    staging folder there); :class:`OutputError` when another run is writing the folder (its lock,
+    :mod:`optlight.locks`, kept from here to the end of a command). Writes nothing that stays.
     """
     path = Path(folder)
-    lock_output(path)
+    locks.acquire(path)
     try:
         return _check_output_folder(path, overwrite, option, force)
-    except BaseException:
-        unlock_output(path)
-        raise
+    finally:
+        locks.release(path)
 
 
 def _check_output_folder(path: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
@@ -466,7 +459,12 @@ def write_folder(
     listed in its manifest (it appeared after the check), and :class:`OutputError` naming the
     folder and the cause when the system refuses a write (a full disk, a file size limit).
     """
-    target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
+    locks.acquire(folder)  # held until the output is in place
+    try:
+        target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
+    except BaseException:
+        locks.release(folder)
+        raise
     staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
     moving = False
     try:
@@ -485,7 +483,7 @@ def write_folder(
         raise _write_error(target.path, e, staging, partial=moving and target.exists) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
-        unlock_output(target.path)
+        locks.release(folder)
     return [target.path / f for f in files]
 
 
@@ -494,15 +492,13 @@ def check_output_file(
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
     never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`,
-    and :class:`OutputError` when another run is writing the file. Takes the file's lock
-    (:func:`lock_output`), released when it is in place or a check fails."""
+    and :class:`OutputError` when another run is writing the file (as :func:`check_output_folder`)."""
     out = Path(path)
-    lock_output(out)
+    locks.acquire(out)
     try:
         return _check_output_file(out, overwrite, option, force)
-    except BaseException:
-        unlock_output(out)
-        raise
+    finally:
+        locks.release(out)
 
 
 def _check_output_file(out: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
@@ -526,7 +522,12 @@ def write_file(
 ) -> Path:
     """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
     rename it to ``path`` (missing folders above it created then), following the output policy."""
-    target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+    locks.acquire(path)  # held until the file is in place
+    try:
+        target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+    except BaseException:
+        locks.release(path)
+        raise
     out = target.path
     temporary = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}{out.suffix}"
     try:
@@ -539,49 +540,8 @@ def write_file(
         raise _write_error(out, e, temporary) from None
     finally:
         temporary.unlink(missing_ok=True)
-        unlock_output(out)
+        locks.release(path)
     return out
-
-
-_locks: dict[str, socket.socket] = {}
-
-
-def lock_output(path: str | Path) -> None:
-    """Hold the lock of writing the output ``path`` until :func:`unlock_output` or the end of this
-    process; raises :class:`OutputError` when another process holds it. Taken by
-    :func:`check_output_folder` and :func:`check_output_file` (so a second run into the same
-    ``--out`` is refused before it starts working) and released when the output is in place.
-
-    The lock is a Unix socket bound to a name in Linux's abstract namespace made of a hash of the
-    resolved path: the bind fails while another process holds the name, and the kernel frees it
-    when its process ends, whatever ends it (a normal exit, ``os._exit``, a signal), so it leaves no
-    file anywhere; a lock file beside the output would stay in the user's folder after every run
-    that ended before removing it. Taken again by the process that holds it, it is held once.
-    Other systems have no abstract namespace: there nothing is locked."""
-    if not sys.platform.startswith("linux"):
-        return
-    key = str(Path(path).resolve())
-    if key in _locks:
-        return
-    name = LOCK_PREFIX + hashlib.sha256(key.encode()).hexdigest()[:32]
-    lock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    try:
-        lock.bind("\0" + name)
-    except OSError as e:
-        lock.close()
-        if e.errno != errno.EADDRINUSE:
-            raise
-        raise OutputError(
-            f"another optlight run is writing {path}; wait for it to end or give another folder"
-        ) from None
-    _locks[key] = lock
-
-
-def unlock_output(path: str | Path) -> None:
-    """Release the lock :func:`lock_output` took on ``path`` (nothing when this process holds none)."""
-    lock = _locks.pop(str(Path(path).resolve()), None)
-    if lock is not None:
-        lock.close()
 
 
 def _write_error(path: Path, error: OSError, staging: Path, partial: bool = False) -> OutputError:
