@@ -617,8 +617,9 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
     directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file or an
     unsupported joint type, listing what is available; from a ``Problem``, a user URDF that does not
     parse, whose meshes do not resolve or that has fewer joints than the light's
-    :data:`LIGHT_CONSTRAINTS`, and an unknown frame, are :class:`ProblemError` naming ``robot.urdf``
-    and ``robot.frame`` (from a spec or name, RobotError naming the key).
+    :data:`LIGHT_CONSTRAINTS` (the problem's robot is to be planned; a spec's may have fewer, for its
+    kinematics alone), and an unknown frame, are :class:`ProblemError` naming ``robot.urdf`` and
+    ``robot.frame`` (from a spec or name, RobotError naming the key).
     """
     file: str | None = None
     if isinstance(source, Problem):
@@ -692,16 +693,6 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             f"{spec.name}: unsupported joint types {', '.join(bad)}; optlight handles revolute, "
             "continuous and prismatic joints"
         )
-    if model.nv < LIGHT_CONSTRAINTS:
-        expected = (
-            f"an arm with at least {LIGHT_CONSTRAINTS} joints for the light's {LIGHT_CONSTRAINTS} constraints "
-            f"(h1–h3, zenith, azimuth); {urdf_path.name} has {model.nv} "
-            f"({', '.join(model.names[j.id] for j in model.joints[1:])})"
-        )
-        if file is not None:
-            raise ProblemError(file, "robot.urdf", expected)
-        raise RobotError(f"robot.urdf: expected {expected}")
-
     # Base placement: pre-multiply everything attached to the universe by T_WB.
     base = placement(spec.base_position_m, spec.base_rpy_deg)
     for jid in range(1, model.njoints):
@@ -718,6 +709,14 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if file is not None:
             raise ProblemError(file, "robot.frame", expected, frame_name)
         raise RobotError(f"robot.frame: expected {expected}, got {frame_name!r}")
+    if file is not None and model.nv < LIGHT_CONSTRAINTS:  # a problem's robot is to be planned
+        joints = ", ".join(model.names[j.id] for j in model.joints[1:])
+        raise ProblemError(
+            file,
+            "robot.urdf",
+            f"an arm with at least {LIGHT_CONSTRAINTS} joints for the light's {LIGHT_CONSTRAINTS} constraints "
+            f"(h1–h3, zenith, azimuth); {urdf_path.name} has {model.nv} ({joints})",
+        )
     tool = model.frames[_find_frame(model, frame_name, spec.name)]
     for taken in ("flange", "light"):
         if model.existFrame(taken):
