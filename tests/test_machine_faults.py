@@ -249,11 +249,13 @@ def batch_spec(tmp: Path) -> str:
 
 
 def not_dask(tmp: Path) -> None:
-    """`batch --scheduler` at an HTTP server: one line saying it is not a Dask scheduler (Dask read
-    its bytes as a message length and tried to allocate 3.07 EiB)."""
+    """`batch --scheduler` and `cell --scheduler` at an HTTP server: one line saying it is not a Dask
+    scheduler (Dask read its bytes as a message length and tried to allocate 3.07 EiB)."""
+    cell_spec = str(Path(__file__).parents[1] / "examples" / "cell_panda.toml")
     with tcp_server(b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\n\r\n" * 4) as address:
-        run = cli("batch", batch_spec(tmp), "--scheduler", address, "--out", str(tmp / "out"), cwd=tmp)
-    one_line(run, f"{address} is not a Dask scheduler")
+        for command, spec in (("batch", batch_spec(tmp)), ("cell", cell_spec)):
+            run = cli(command, spec, "--scheduler", address, "--out", str(tmp / command), cwd=tmp)
+            one_line(run, f"{address} is not a Dask scheduler")
 
 
 def silent_server(tmp: Path) -> None:
