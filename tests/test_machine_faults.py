@@ -142,6 +142,34 @@ def every_bsdf(tmp: Path) -> None:
     assert abs(textured - exact) < 0.01 * exact
 
 
+def degenerate_cost_maps(tmp: Path) -> None:
+    """The cost map of a sweep that is all 0, all one value, all NaN, or holds ±inf is drawn, its
+    colour scale positive and increasing (a logarithmic scale refuses anything else)."""
+    from types import SimpleNamespace
+
+    from optlight.viz.drawing import FigureJob
+    from optlight.viz.figures import COST_FLOOR, cost_map_figure, log_color_limits
+
+    zenith, azimuth = np.radians([5.0, 15.0, 25.0]), np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+    finite_inf = np.where(np.arange(24).reshape(8, 3) % 5 == 0, np.inf, 2.0)
+    for k, cost in enumerate((np.zeros((8, 3)), np.full((8, 3), 0.3), np.full((8, 3), np.nan), finite_inf, -finite_inf)):
+        vmin, vmax = log_color_limits(cost)
+        assert COST_FLOOR <= vmin < vmax and np.isfinite(vmax)
+        landmarks = SimpleNamespace(
+            sweep=SimpleNamespace(cost=cost, zenith=zenith, azimuth=azimuth),
+            azimuths=azimuth[:2],
+            zeniths=zenith[:2],
+            landmarks=(),
+            view_zenith=0.0,
+            resolution=(32, 32),
+        )
+        png = FigureJob(cost_map_figure, (landmarks, np.radians(30.0)), 60).save(tmp / f"cost_{k}.png")
+        with Image.open(png) as image:
+            assert image.size[0] > 100
+    assert log_color_limits(np.array([4.0, 0.0])) == (4e-5, 4.0)  # five decades below the largest
+    assert log_color_limits(np.empty((0, 3))) == (COST_FLOOR, 10 * COST_FLOOR)
+
+
 ARM = """<?xml version="1.0"?>
 <robot name="arm"><link name="base"/>{links}<link name="tool"/>{joints}
 <joint name="jt" type="fixed"><parent link="l{n}"/><child link="tool"/><origin xyz="0.05 0 0"/></joint></robot>
@@ -275,6 +303,7 @@ class Fault:
 FAULTS = [
     Fault("figures of power 0 and ambient 0", dark_light),
     Fault("figures of an objective term of weight 0", zero_weight),
+    Fault("cost maps of constant, empty and non-finite sweeps", degenerate_cost_maps),
     Fault("every [world] bsdf, roughplastic on a vertex-coloured mesh", every_bsdf),
     Fault("a user arm of fewer than 5 joints", few_joints),
     Fault("a full disk (a file size limit)", full_disk),
