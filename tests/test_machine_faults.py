@@ -6,6 +6,7 @@ server on 127.0.0.1 that is not Dask's), or through the capture API for the phys
 
 from __future__ import annotations
 
+import itertools
 import resource
 import signal
 import socket
@@ -104,24 +105,26 @@ def zero_weight(tmp: Path) -> None:
 
 
 def every_bsdf(tmp: Path) -> None:
-    """Every documented [world] bsdf renders the face (a vertex-coloured mesh) finite and lit; the
-    roughplastic of a textured mesh (a blend of two constant roughplastics) renders what Mitsuba's
-    own roughplastic of constant reflectance renders, on the same sphere: the mean within 1 %."""
+    """Every documented [world] bsdf renders the face (a vertex-coloured mesh), and a sphere of albedo
+    scaled past 1, finite and lit; the roughplastic of a textured mesh (a blend of two constant
+    roughplastics) renders what Mitsuba's own roughplastic of constant reflectance renders, on the
+    same sphere: the mean within 1 %."""
     from optlight.capture.mitsuba import MitsubaCamera
     from optlight.scene import Scene
     from optlight.spec import WorldSpec, problem_from_dict
 
     bsdfs = get_args(get_type_hints(WorldSpec)["bsdf"])  # the documented options
     assert set(bsdfs) == {"lambertian", "roughplastic", "principled"}
-    for bsdf in bsdfs:
-        problem = problem_from_dict(
-            {"object": {"face": {"resolution": 48}}, "camera": {"width": 48, "height": 48}, "world": {"spp": 8, "bsdf": bsdf}}
-        )
+    # the face, and a sphere whose albedo the world scales past 1 (an rgb reflectance must be ≤ 1)
+    objects = ({"face": {"resolution": 48}}, {"kind": "sphere", "albedo": 0.8})
+    for bsdf, (k, obj) in itertools.product(bsdfs, enumerate(objects)):
+        world = {"spp": 8, "bsdf": bsdf, "albedo_scale": 1.5 if k else 1.0}
+        problem = problem_from_dict({"object": obj, "camera": {"width": 48, "height": 48}, "world": world})
         scene = Scene.from_problem(problem)
         image = MitsubaCamera(scene, problem.world).capture(scene.sphere.position(0.3, 0.5)).image
         mask = scene.gbuffer.mask
-        assert np.isfinite(image).all(), bsdf
-        assert image[mask].mean() > 0.1 and image[mask].mean() > 20 * image[~mask].mean(), bsdf
+        assert np.isfinite(image).all(), (bsdf, obj)
+        assert image[mask].mean() > 0.1 and image[mask].mean() > 20 * image[~mask].mean(), (bsdf, obj)
 
     def sphere_mean(texture: float) -> float:
         # albedo_texture > 0 makes the sphere a mesh with vertex colours; 0 leaves Mitsuba's exact sphere

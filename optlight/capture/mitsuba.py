@@ -169,7 +169,8 @@ class MitsubaCamera:
                 "type": "sphere",
                 "center": np.asarray(center, float).tolist(),
                 "radius": float(radius),
-                "bsdf": self._bsdf({"type": "rgb", "value": [rho] * 3}),
+                # uniform, not rgb: an rgb reflectance must lie in [0, 1], and albedo_scale may pass 1
+                "bsdf": self._bsdf({"type": "uniform", "value": rho}),
             }
         mesh = obj.mesh
         vector = (lambda x: x) if mi.variant().startswith("scalar") else mi.Float
