@@ -71,7 +71,7 @@ from typing import TYPE_CHECKING, Any
 
 from optlight import locks
 from optlight.errors import OptlightError, ProblemError, UsageError
-from optlight.export import MANIFEST, check_output_folder, write_folder
+from optlight.export import MANIFEST, check_output_folder, write_folder, writes_into
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
@@ -100,6 +100,8 @@ PLANS = "plans"
 RECORDS = "records"
 #: Written first into a batch's output folder: marks it as a batch's, which a later run resumes.
 BATCH_MARKER = ".optlight-batch.json"
+#: What a batch keeps when the system refuses one of its writes.
+RESUME = "the rows finished so far are kept: run the batch again to resume"
 
 
 class SchedulerError(OptlightError):
@@ -449,10 +451,11 @@ def store_row(out: Path, row: BatchRow, outcome: Mapping[str, Any]) -> RowRecord
         solve_s=float(outcome.get("solve_s", math.nan)),
     )
     path = _record_path(out, row.id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(record.to_dict(), indent=1) + "\n")
-    tmp.replace(path)
+    with writes_into(out, RESUME):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(json.dumps(record.to_dict(), indent=1) + "\n")
+        tmp.replace(path)
     return record
 
 
@@ -486,7 +489,7 @@ def write_table(out: Path, records: Sequence[RowRecord], keys: Sequence[str]) ->
     """``results.csv`` and ``results.md`` in ``out``: one line per row (:func:`table_rows`)."""
     rows = table_rows(records, keys)
     csv_path, md_path = out / "results.csv", out / "results.md"
-    with csv_path.open("w", newline="") as f:
+    with writes_into(out, RESUME), csv_path.open("w", newline="") as f:
         csv.writer(f).writerows(rows)
 
     def line(cells: Sequence[str]) -> str:
@@ -496,7 +499,8 @@ def write_table(out: Path, records: Sequence[RowRecord], keys: Sequence[str]) ->
     md = [f"# Batch results: {ok} of {len(records)} rows solved", "", line(rows[0])]
     md.append("|" + "---|" * len(rows[0]))
     md += [line(cells) for cells in rows[1:]]
-    md_path.write_text("\n".join(md) + "\n")
+    with writes_into(out, RESUME):
+        md_path.write_text("\n".join(md) + "\n")
     return csv_path, md_path
 
 
@@ -684,11 +688,12 @@ def run_batch(
     out = Path(out)
     resume = check_batch_folder(out)
     spec = spec if isinstance(spec, BatchSpec) else load_batch_spec(spec)
-    out.mkdir(parents=True, exist_ok=True)
-    if not resume:
-        (out / BATCH_MARKER).write_text(
-            json.dumps({"written_by": "optlight batch", "spec": json_safe(spec.source)}, indent=1) + "\n"
-        )
+    with writes_into(out, RESUME):
+        out.mkdir(parents=True, exist_ok=True)
+        if not resume:
+            (out / BATCH_MARKER).write_text(
+                json.dumps({"written_by": "optlight batch", "spec": json_safe(spec.source)}, indent=1) + "\n"
+            )
     start = time.perf_counter()
     records: list[RowRecord | None] = [done_record(out, row) for row in spec.rows]
     todo = [i for i, r in enumerate(records) if r is None]

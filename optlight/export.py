@@ -46,7 +46,8 @@ import json
 import os
 import shutil
 import uuid
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -480,7 +481,8 @@ def write_folder(
             moving = True
             _move_into_place(staging, target, names, option)
     except OSError as e:
-        raise _write_error(target.path, e, staging, partial=moving and target.exists) from None
+        partial = "some of its files may be the new output's" if moving and target.exists else "nothing was written"
+        raise _write_error(target.path, e, staging, partial) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
         locks.release(folder)
@@ -544,18 +546,27 @@ def write_file(
     return out
 
 
-def _write_error(path: Path, error: OSError, staging: Path, partial: bool = False) -> OutputError:
-    """The one-line error for ``error``, met while writing the output ``path`` through ``staging``
-    (the staging folder or temporary file): the folder, the cause, the file it was writing, and
-    whether ``path`` may hold ``partial`` output (files renamed into an existing folder before it)."""
+@contextmanager
+def writes_into(folder: Path, kept: str) -> Iterator[None]:
+    """Writes into ``folder`` outside :func:`write_folder` (a batch's records and table, which a run
+    adds as it goes): a write the system refuses is an :class:`OutputError` naming the folder, the
+    cause and what is ``kept``."""
+    try:
+        yield
+    except OSError as e:
+        raise _write_error(folder, e, folder, kept) from None
+
+
+def _write_error(path: Path, error: OSError, within: Path, done: str = "nothing was written") -> OutputError:
+    """The one-line error for ``error``, met while writing the output ``path`` through ``within``
+    (the staging folder, the temporary file, the folder itself): the folder, the cause, the file it
+    was writing (relative to ``within``), and what was ``done``."""
     cause = error.strerror or str(error)
     if error.errno in WRITE_FAILURES:
         cause = f"{WRITE_FAILURES[error.errno]} ({cause})"
     if error.filename:
         name = Path(os.fsdecode(error.filename))
-        where = name.relative_to(staging) if name.is_relative_to(staging) and name != staging else name
-        cause += f" at {where}"
-    done = "some of its files may be the new output's" if partial else "nothing was written"
+        cause += f" at {name.relative_to(within) if name.is_relative_to(within) and name != within else name}"
     return OutputError(f"cannot write {path}: {cause}; {done}")
 
 
