@@ -18,6 +18,7 @@ import importlib
 import logging
 import math
 import os
+import shlex
 import signal
 import sys
 import warnings
@@ -51,7 +52,7 @@ MODULES = {
 }
 #: What ``solve`` imports once its figure worker has started: the worker's own imports (~0.8 s of a
 #: core) then overlap these and the problem's build, which leave a core idle, instead of taking
-#: one from the landmark search (0.5 → 0.9 s on the default problem when they did).
+#: one from the landmark search (which they would slow by ~80 % on the default problem).
 SOLVE_MODULES = ("optlight.preflight", "optlight.pipeline", "optlight.report", "optlight.viz.preview")
 
 
@@ -175,15 +176,15 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.markup import escape
 
-    from optlight.acquisition import acquire
+    from optlight.acquisition import ROUNDS, RoundFolders, acquire
     from optlight.export import check_output_folder
     from optlight.preflight import preflight
 
-    if args.camera == "folder" and args.images is None:
-        raise UsageError("--images", "the folder camera (--camera folder) needs the folder of the captured images")
     out = Path(args.out)
-    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
+    in_rounds = args.camera == "folder"  # a real camera: one run per round, continued in --out
+    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE, resume=ROUNDS if in_rounds else None)
     problem = load_problem(args.problem)
+    rounds = RoundFolders(out, problem) if in_rounds else None  # the rounds' images checked before any work
     console = Console()  # stdout: stderr carries only the one-line error of a failed run
     with console.status("building the scene, objectives, robot and environment"):
         setup = preflight(problem)  # built once: the loop's first plan uses it as it is
@@ -194,12 +195,13 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             status.update(f"iteration {iteration}: {stage} {done}/{total}")
 
         with warnings.catch_warnings(record=True):
-            acquisition = acquire(setup, args.camera, images=args.images, progress=progress)
+            acquisition = acquire(setup, rounds or args.camera, progress=progress)
     interrupts.check()
     for it in acquisition.iterations:
+        measure = "" if it.measure is None else f", {acquisition.measure} {it.measure:.4g}"
         console.print(
-            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
-            f"{it.wall_time_s:.1f} s"
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}"
+            f"{measure}, {it.wall_time_s:.1f} s"
         )
     calibration = acquisition.calibration
     if calibration is not None:
@@ -207,14 +209,19 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"calibrated model: {calibration.light_model} light, power {calibration.power:.3g}, ambient "
             f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
         )
-    best = acquisition.best
-    console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
-        f"{escape(acquisition.status)}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
-        f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
-    )
+    if acquisition.iterations:
+        best = acquisition.best
+        console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
+            f"{escape(acquisition.status)}; best by the {acquisition.measure}: iteration {best.index}, "
+            f"{best.score:.4g} ({best.score / max(acquisition.open_loop.score, 1e-300):.2f} × the open loop's)"
+        )
     with console.status(f"writing {out}/"):
         acquisition.save(out, overwrite=args.force)
-    console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
+    if in_rounds:  # plain text, not wrapped: the user's instructions, with the command to paste
+        command = shlex.join(["optlight", "acquire", args.problem, "--camera", "folder", "--out", args.out])
+        print(acquisition.instructions(out, command))
+    else:
+        console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
     return 0
 
 
@@ -353,9 +360,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p = add("acquire", _cmd_acquire, "camera in the loop: plan, capture, calibrate, re-plan; write the dataset")
     p.add_argument("problem", help="problem file path or built-in name")
-    p.add_argument("--camera", choices=("model", "mitsuba", "folder"), default="model", help="what captures")
-    p.add_argument("--images", help="folder with captures.csv and the images (--camera folder)")
-    p.add_argument("--out", required=True, help="dataset folder, new or empty")
+    p.add_argument(
+        "--camera",
+        choices=("model", "mitsuba", "folder"),
+        default="model",
+        help="what captures: the model or Mitsuba camera, or a real one (folder: one run per round, see --out)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help="dataset folder, new or empty; with --camera folder also where each round's images go, and "
+        "the same command continues an acquisition there",
+    )
     p.add_argument("--force", action="store_true", help=force_help)
     p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
     p.add_argument("problem", help="problem file path or built-in name")

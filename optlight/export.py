@@ -1,5 +1,5 @@
 """Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml, captures.csv
-and figures (DESIGN §6–§7).
+and figures (docs/design.md §12).
 
 Nothing is written for a plan that failed verification, and no output is ever left half written or
 written over files optlight did not write. The output policy (:func:`check_output_folder`,
@@ -12,6 +12,10 @@ written over files optlight did not write. The output policy (:func:`check_outpu
   files optlight wrote there, written last); it is updated only with ``overwrite`` (the command
   line's ``--force``), and then only the files it lists are replaced or removed: files the user
   added there are kept;
+- an output written in rounds (``optlight acquire --camera folder``: the user adds the images of a
+  round, then runs the command again) says so in its manifest (``"resume": <kind>``, written with
+  ``resumable``); a caller continuing that kind of output (``resume``) updates it without
+  ``overwrite``, by the same rule: only the files the manifest lists are replaced or removed;
 - anything else that exists (a file, a folder holding files optlight did not write, a broken link)
   is refused with a one-line :class:`UsageError`, before any work when the caller checks first;
 - a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
@@ -32,8 +36,15 @@ goal; with all three of positions, velocities and accelerations, joint_trajector
 interpolates quintically between the points, as :func:`read_joint_trajectory` does.
 
 captures.csv has one row per capture: its index, the dwell's start and end, the camera trigger (the
-dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light direction
-in the OpenCV camera frame, the light position in the world and the joint angles at the trigger.
+dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light's zenith
+and azimuth on the light sphere (degrees, the angles ``optlight render --zenith --azimuth`` takes:
+zenith from the direction towards the camera, azimuth 0 to the image's right and 90 towards its
+top), the light direction in the frame of lights.lp (columns ``light_dir_right``, ``light_dir_up``,
+``light_dir_to_camera``), the light position in the world and the joint angles at the trigger.
+
+Light directions: one frame for every file that holds them (captures.csv, lights.lp and the DiLiGenT
+folder's ``light_directions.txt``): the unit vector from the object towards the light, x to the
+right of the image, y towards its top, z towards the camera (:data:`LIGHT_FRAME`).
 """
 
 from __future__ import annotations
@@ -80,6 +91,13 @@ WRITE_FAILURES = {
     errno.EDQUOT: "the disk quota is exceeded",
     errno.EFBIG: "a file is larger than this system lets a process write",
 }
+#: The frame of every light direction optlight writes (captures.csv, lights.lp, light_directions.txt).
+LIGHT_FRAME = (
+    "unit vector from the object towards the light; x to the right of the image, y towards its top, "
+    "z towards the camera (the OpenCV camera frame's (x, -y, -z))"
+)
+#: captures.csv's columns of the light direction, in :data:`LIGHT_FRAME`.
+LIGHT_DIRECTION_COLUMNS = ("light_dir_right", "light_dir_up", "light_dir_to_camera")
 
 
 def lp_direction(d_camera: ArrayLike) -> Array:
@@ -216,17 +234,20 @@ def write_captures(
     image_pattern: str,
     light_directions_camera: ArrayLike,
     light_positions: ArrayLike,
+    light_angles_deg: ArrayLike,
     joint_names: Sequence[str],
 ) -> Path:
     """Write captures.csv (module docstring): one row per dwell of ``trajectory``; the trigger is the
     dwell's start plus ``settle_s`` (0 ≤ settle_s < each dwell's length), the joint angles are the
-    trajectory's at the trigger. Directions (unit, camera frame) and positions (m, world) per capture."""
+    trajectory's at the trigger. Per capture: the direction (unit, OpenCV camera frame; written in
+    :data:`LIGHT_FRAME`), the position (m, world) and the (zenith, azimuth) in degrees."""
     intervals = trajectory.landmark_intervals
     m = intervals.shape[0]
-    directions = np.asarray(light_directions_camera, float).reshape(-1, 3)
+    directions = lp_direction(np.asarray(light_directions_camera, float).reshape(-1, 3))
     positions = np.asarray(light_positions, float).reshape(-1, 3)
-    if directions.shape[0] != m or positions.shape[0] != m:
-        raise ValueError(f"expected {m} light directions and positions, one per capture")
+    angles = np.asarray(light_angles_deg, float).reshape(-1, 2)
+    if directions.shape[0] != m or positions.shape[0] != m or angles.shape[0] != m:
+        raise ValueError(f"expected {m} light directions, positions and angles, one per capture")
     lengths = intervals[:, 1] - intervals[:, 0]
     if not (settle_s >= 0 and np.all(settle_s < lengths)):
         raise ValueError(f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell ({lengths.min():.6g} s)")
@@ -234,8 +255,8 @@ def write_captures(
     trigger = intervals[:, 0] + settle_s
     q = trajectory.sample(trigger)[0] if m else np.zeros((0, len(joint_names)))
     header = (
-        ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image"]
-        + [f"light_dir_camera_{a}" for a in "xyz"]
+        ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image", "zenith_deg", "azimuth_deg"]
+        + list(LIGHT_DIRECTION_COLUMNS)
         + [f"light_position_{a}_m" for a in "xyz"]
         + [f"q_{n}" for n in joint_names]
     )
@@ -246,7 +267,7 @@ def write_captures(
         for i in range(m):
             writer.writerow(
                 [i, *(f"{x:.9f}" for x in (*intervals[i], trigger[i])), names[i]]
-                + [f"{x:.12g}" for x in (*directions[i], *positions[i], *q[i])]
+                + [f"{x:.12g}" for x in (*angles[i], *directions[i], *positions[i], *q[i])]
             )
     return out
 
@@ -389,12 +410,19 @@ class OutputTarget:
 
 
 def check_output_folder(
-    folder: str | Path, *, overwrite: bool = False, option: str = "folder", force: str = "overwrite=True"
+    folder: str | Path,
+    *,
+    overwrite: bool = False,
+    option: str = "folder",
+    force: str = "overwrite=True",
+    resume: str | None = None,
 ) -> OutputTarget:
     """Whether ``folder`` may receive an output folder (module docstring), and where to stage it.
 
     ``option`` names the folder in errors (``--out`` on the command line), ``force`` what the
-    caller passes to allow replacing an earlier output. Raises :class:`UsageError` for an existing
+    caller passes to allow replacing an earlier output; ``resume`` the kind of output in rounds the
+    caller continues (an earlier output whose manifest names that kind is updated as with
+    ``overwrite``). Raises :class:`UsageError` for an existing
     file or broken link, a non-empty folder without a valid manifest, an earlier output without
     ``overwrite``, and a location where nothing can be written (tried by creating and removing a
     staging folder there); :class:`OutputError` when another run is writing the folder (its lock,
@@ -403,12 +431,14 @@ def check_output_folder(
     path = Path(folder)
     locks.acquire(path)
     try:
-        return _check_output_folder(path, overwrite, option, force)
+        return _check_output_folder(path, overwrite, option, force, resume)
     finally:
         locks.release(path)
 
 
-def _check_output_folder(path: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
+def _check_output_folder(
+    path: Path, overwrite: bool, option: str, force: str, resume: str | None
+) -> OutputTarget:
     if path.is_symlink() and not path.exists():
         raise UsageError(option, f"{path} is a broken symbolic link; give a new or empty folder")
     if not path.exists():
@@ -432,7 +462,7 @@ def _check_output_folder(path: Path, overwrite: bool, option: str, force: str) -
                 f"{path} is not empty and holds files optlight did not write; give a new or empty folder "
                 "(optlight never replaces files it did not write)",
             )
-        if not overwrite:
+        if not overwrite and (resume is None or _manifest_resume(path) != resume):
             raise UsageError(
                 option,
                 f"{path} holds the output of an earlier optlight run; pass {force} to replace it "
@@ -450,9 +480,13 @@ def write_folder(
     overwrite: bool = False,
     option: str = "folder",
     force: str = "overwrite=True",
+    resume: str | None = None,
+    resumable: str | None = None,
 ) -> list[Path]:
     """Fill ``folder`` with the files ``write(staging)`` writes into the staging folder it is given
     (it returns their paths), following the output policy; returns the paths in ``folder``.
+    ``resume``: as for :func:`check_output_folder`; ``resumable``: the kind of output in rounds this
+    one is, recorded in the manifest so that the next round may continue it (None: a finished output).
 
     The staging folder is removed when ``write`` raises or Ctrl-C arrives before the final renames;
     those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises,
@@ -462,7 +496,7 @@ def write_folder(
     """
     locks.acquire(folder)  # held until the output is in place
     try:
-        target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
+        target = check_output_folder(folder, overwrite=overwrite, option=option, force=force, resume=resume)
     except BaseException:
         locks.release(folder)
         raise
@@ -473,9 +507,10 @@ def write_folder(
             staging.mkdir()
         files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
         names = sorted({str(f) for f in files})
-        (staging / MANIFEST).write_text(
-            json.dumps({"written_by": f"optlight {_version()}", "files": names}, indent=1) + "\n"
-        )
+        manifest: dict[str, Any] = {"written_by": f"optlight {_version()}", "files": names}
+        if resumable is not None:
+            manifest["resume"] = resumable
+        (staging / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
         interrupts.check()  # an interrupt a library swallowed while writing
         with interrupts.deferred():
             moving = True
@@ -606,6 +641,16 @@ def _read_manifest(folder: Path) -> tuple[str, ...] | None:
         if p.is_absolute() or ".." in p.parts or str(p) == MANIFEST or "\\" in f:
             return None
     return tuple(files)
+
+
+def _manifest_resume(folder: Path) -> str | None:
+    """The kind of output in rounds the folder's manifest says may be continued, or None."""
+    try:
+        data = json.loads((folder / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    kind = data.get("resume") if isinstance(data, dict) else None
+    return kind if isinstance(kind, str) else None
 
 
 def _move_into_place(staging: Path, target: OutputTarget, names: Sequence[str], option: str) -> None:

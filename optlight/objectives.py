@@ -1,4 +1,4 @@
-"""Luminance objectives (DESIGN §4): soft histograms, histogram distances, image terms.
+"""Luminance objectives (docs/design.md §4): soft histograms, histogram distances, image terms.
 
 Every term is a pure function of the pixel vector of the object, with two twins that compute the
 same number: ``numpy(u)`` on arrays (batched over leading axes) and ``casadi(u)`` on an MX column,

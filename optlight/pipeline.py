@@ -224,10 +224,9 @@ class PlacementAhead:
     while the landmark search goes on: each landmark is placed as the search finds it (:meth:`offer`),
     its placement needing only the landmarks before it. The search leaves a core partly idle and
     the placement, a chain of IPOPT solves, uses one; most of both runs without the GIL (Embree's
-    rays, NumPy's kernels, IPOPT), so on the two cores of the benchmark machine the search and the
-    placement of the default face took 0.93–1.02 s together instead of 1.06–1.10 s, those of the
-    144-capture / 3-obstacle scaling cell 6.1–6.3 s instead of 7.0 s (alternating runs; the search
-    takes longer, the placement left after it much less), with the same placement to the bit.
+    rays, NumPy's kernels, IPOPT), so on two cores the search and the placement together take
+    ~10 % less than one after the other (the search takes longer, the placement left after it
+    much less), with the same placement to the bit.
 
     The chain takes every landmark offered for a capture. :meth:`placement` returns its placement
     when the captures are the landmarks offered, in their order; when some were merged

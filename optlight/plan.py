@@ -27,7 +27,7 @@ from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, image_names
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob, FigureWorker
 from optlight.viz.preview import Preview
@@ -192,8 +192,9 @@ class Plan:
     def model_capture(self) -> ModelCapture:
         """The visited lights captured by the model camera, normals recovered, in the DiLiGenT
         layout (:func:`optlight.datasets.model_capture`; ``[lightset]`` dark and saturation levels)."""
-        spec = self.problem.lightset
-        return model_capture(self.scene, self.light_directions_sphere, spec.dark_level, spec.saturation_level)
+        spec, names = self.problem.lightset, image_names(self.problem.trajectory.image_pattern, len(self.visited))
+        # the images keep the names of captures.csv and lights.lp
+        return model_capture(self.scene, self.light_directions_sphere, spec.dark_level, spec.saturation_level, names)
 
     @property
     def light_directions_sphere(self) -> Array:

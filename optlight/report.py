@@ -27,7 +27,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.export import write_captures, write_joint_trajectory, write_results
+from optlight.export import (
+    LIGHT_DIRECTION_COLUMNS,
+    LIGHT_FRAME,
+    write_captures,
+    write_joint_trajectory,
+    write_results,
+)
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.timing import Trajectory
@@ -179,6 +185,20 @@ def report_markdown(
         lines += _lightset_lines(s["lightset"])
     if warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
+    holders = f"captures.csv's `{'`, `'.join(LIGHT_DIRECTION_COLUMNS)}`, `lights.lp`"
+    if "lightset" in s:
+        holders += ", the DiLiGenT folder's `light_directions.txt`"
+    lines += [
+        "## Files and frames",
+        "",
+        "- `joint_trajectory.yaml` (ROS 2 JointTrajectory) and `trajectory.csv`: the motion; "
+        "`captures.csv`: per capture the camera trigger (`trigger_s`), the image name, the light's "
+        "`zenith_deg` and `azimuth_deg` (the angles `optlight render --zenith --azimuth` takes), its "
+        "direction, its position (`light_position_*_m`, world frame, m) and the joint angles.",
+        f"- Light directions ({holders}): {LIGHT_FRAME}.",
+        "- Image names: the same in every file that names the images.",
+        "",
+    ]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
@@ -339,6 +359,7 @@ def save_results(
                 image_pattern=traj_spec.image_pattern,
                 light_directions_camera=light_directions_camera,
                 light_positions=np.array([lm.position for lm in visited]),
+                light_angles_deg=np.rad2deg([(lm.zenith, lm.azimuth) for lm in visited]).reshape(-1, 2),
                 joint_names=robot.joint_names,
             )
         ]

@@ -5,7 +5,7 @@ range and a one-line description; :func:`load_problem` checks a file against the
 ``python -m optlight.spec`` writes the reference (``docs/problems.md``) from them, so the code and
 the documentation cannot drift apart.
 
-Conventions (DESIGN §2): metres and degrees in files (keys end in ``_m`` / ``_deg``), radians in
+Conventions (docs/design.md §2): metres and degrees in files (keys end in ``_m`` / ``_deg``), radians in
 code. Paths inside a file are relative to that file.
 """
 
@@ -80,7 +80,7 @@ class FaceSpec:
 @dataclass(frozen=True)
 class ObjectSpec:
     """The observed object. Its frame is the light-sphere frame S at the centre O: +z towards the
-    camera, +y up (DESIGN §2), so a mesh's front is its +z side and its top is +y."""
+    camera, +y up (docs/design.md §2), so a mesh's front is its +z side and its top is +y."""
 
     kind: Literal["face", "sphere", "mesh"] = key("face", "what the camera looks at")
     center_m: Vec3 = key((0.5, 0.0, 0.4), "object centre O in the world frame", unit="m")
@@ -132,7 +132,7 @@ class LightSphereSpec:
 
 @dataclass(frozen=True)
 class LightSpec:
-    """Lambertian light model (DESIGN §4): I = clip(gain·ρ(E·v·max(0, n·l)·falloff + ambient))."""
+    """Lambertian light model (docs/design.md §4): I = clip(gain·ρ(E·v·max(0, n·l)·falloff + ambient))."""
 
     model: Literal["directional", "point"] = key(
         "directional", "directional light, or point light with (b/r)² falloff"
@@ -302,7 +302,7 @@ class LandmarksSpec:
 
 @dataclass(frozen=True)
 class TrajectorySpec:
-    """How the robot gets there (DESIGN §6)."""
+    """How the robot gets there (docs/design.md §6)."""
 
     order: Literal["azimuth", "tour"] = key(
         "azimuth", "visit the landmarks in azimuth order, or a shorter tour in joint space"
@@ -462,7 +462,7 @@ class ViewSpec:
 
 @dataclass(frozen=True)
 class LightSetSpec:
-    """A set of N lights scored together (DESIGN §10) instead of landmarks matched one by one:
+    """A set of N lights scored together (docs/design.md §10) instead of landmarks matched one by one:
     photometric stereo (the expected normal error of the set), RTI (even coverage of the cap) or a
     given grid (a face database's directions, each mapped to the nearest allowed light). Off
     (kind = "none") by default."""
@@ -540,7 +540,7 @@ class LightSetSpec:
 
 @dataclass(frozen=True)
 class WorldSpec:
-    """How the real scene differs from the model (DESIGN §11): what the model and physically based
+    """How the real scene differs from the model (docs/design.md §11): what the model and physically based
     cameras of the camera-in-the-loop capture (:mod:`optlight.capture`), never what the planner
     assumes. Every default is the model itself (a Lambertian object, the exact light, no
     inter-reflection, a linear camera without noise)."""
@@ -584,7 +584,7 @@ class WorldSpec:
 
 @dataclass(frozen=True)
 class LoopSpec:
-    """The camera in the loop (DESIGN §11): plan, capture at the landmarks, calibrate the model from
+    """The camera in the loop (docs/design.md §11): plan, capture at the landmarks, calibrate the model from
     the captures, re-plan on the calibrated model, until the measured objective stops improving."""
 
     iterations: int = key(4, "most plan-capture-calibrate rounds (the first is the open-loop plan)", lo=1, hi=50)
@@ -680,10 +680,10 @@ def image_names(pattern: str, count: int) -> list[str]:
 
 #: Peak memory of a solve: a fixed part (the libraries, the robot, the NLPs; ~250 MB over the
 #: imports) plus a part per object pixel at the camera's resolution (rays, G-buffer, images). Whole
-#: solves of the default problem grew by ~800 bytes per pixel at 256²–1024² when measured two stops
-#: ago, ~80 at 128²–320² now; the constant keeps the larger (temporaries of the G-buffer's rays grow
-#: with the image). The soft histogram no longer adds bytes per pixel and bin: its NumPy kernel runs
-#: in chunks of fixed size (0.9 byte per pixel and bin measured, 32 → 128 bins at 320²; it was 72).
+#: solves of the default problem grow by ~80 bytes per pixel at 128²–320² and by up to ~800 at
+#: 256²–1024²; the constant keeps the larger (temporaries of the G-buffer's rays grow with the
+#: image). The soft histogram adds almost nothing per pixel and bin: its NumPy kernel runs in chunks
+#: of fixed size (~1 byte per pixel and bin, 32 → 128 bins at 320²).
 #: Every image pixel is counted as an object pixel, since the object may fill the image.
 MEMORY_BASE_BYTES = 600e6
 MEMORY_BYTES_PER_PIXEL = 1200.0

@@ -1,4 +1,4 @@
-"""Independent verification of a timed plan before anything is exported (DESIGN §6).
+"""Independent verification of a timed plan before anything is exported (docs/design.md §6).
 
 The checks use only the trajectory's own samples and the caller's forward kinematics, never the
 planner's or TOPPRA's internal data. The trajectory is resampled at ``rate_hz`` (≥ 1 kHz) plus every
@@ -8,7 +8,7 @@ dwell/motion boundary (and just before each), every capture time, and then:
 - ``velocity``: |q̇_j| ≤ v_max,j (1 + limit_rel);
 - ``acceleration``: |q̈_j| ≤ a_max,j (1 + limit_rel);
 - at every sample of every dwell (capture time included), with (a, R) = light_pose(q):
-  ``h``: |h| = |Rᵀ(O − a) − [0, 0, b]| ≤ h_m (on the sphere and aimed at O, DESIGN §3);
+  ``h``: |h| = |Rᵀ(O − a) − [0, 0, b]| ≤ h_m (on the sphere and aimed at O, docs/design.md §3);
   ``aim``: angle between the light axis R e_z and O − a ≤ aim_rad;
   ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
 - ``path`` (when a planned path is given): distance from every sampled light position to the

@@ -1,4 +1,4 @@
-"""Plans in an environment (issue 7), end to end on the obstacle problems at reduced sizes: the
+"""Plans in an environment, end to end on the obstacle problems at reduced sizes: the
 constrained plan clears every margin by the exact (coal) checks of the verification; the
 unconstrained plan of the same problem, checked afterwards, is caught and cannot be saved; a
 trajectory through the table and a light in the camera's view cone are caught by the verification."""
@@ -287,7 +287,7 @@ def test_a_light_in_the_view_cone_is_caught() -> None:
 
 
 def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
-    """The issue's problem: table, camera stand, wall and the view cone at the captures (the
+    """table_wall: table, camera stand, wall and the view cone at the captures (the
     placement NLP gives the landmarks whose IK solution breaks a row clear joint angles)."""
     problem = reduced("table_wall")
     plan = solve_quietly(problem)

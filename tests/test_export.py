@@ -15,11 +15,13 @@ from optlight.export import (
     MANIFEST,
     _yaml_float,
     _yaml_rows,
+    check_output_folder,
     joint_trajectory_text,
     json_safe,
     lp_direction,
     lp_text,
     write_file,
+    write_folder,
     write_results,
 )
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
@@ -243,6 +245,36 @@ def test_an_earlier_output_is_replaced_only_with_overwrite_and_user_files_stay(t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging left
 
 
+def test_an_output_in_rounds_is_continued_by_its_kind_only_and_user_files_stay(tmp_path) -> None:
+    """An output written with ``resumable`` (the folder camera's rounds) is updated without
+    ``overwrite`` by a writer continuing that kind, which replaces only the files the manifest lists;
+    another kind, a plain writer and a finished output are refused as any earlier output."""
+    out = tmp_path / "run"
+
+    def writer(names: list[str]):
+        def write(staging: Path) -> list[Path]:
+            for name in names:
+                (staging / name).parent.mkdir(parents=True, exist_ok=True)
+                (staging / name).write_text("optlight")
+            return [staging / name for name in names]
+
+        return write
+
+    write_folder(out, writer(["state.json", "round_00/plan.json"]), resumable="rounds")
+    assert json.loads((out / MANIFEST).read_text())["resume"] == "rounds"
+    (out / "round_00" / "r00_000.png").write_text("the user's image")
+    before = tree(out)
+    for kwargs in ({}, {"resume": "other"}):
+        with pytest.raises(UsageError, match="earlier optlight run"):
+            write_folder(out, writer(["state.json"]), **kwargs)
+        assert tree(out) == before
+    write_folder(out, writer(["state.json", "round_00/plan.json", "round_01/plan.json"]), resume="rounds")
+    assert (out / "round_00" / "r00_000.png").read_text() == "the user's image"
+    assert "resume" not in json.loads((out / MANIFEST).read_text())  # finished
+    with pytest.raises(UsageError, match="earlier optlight run"):
+        check_output_folder(out, resume="rounds")
+
+
 @pytest.mark.parametrize(
     "manifest",
     ['{"files": ["../outside.txt"]}', '{"files": ["/etc/passwd"]}', "not json", '{"files": "a"}', "[]"],
@@ -391,6 +423,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
         image_pattern="cap_{index:02d}.png",
         light_directions_camera=directions(),
         light_positions=positions,
+        light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
         joint_names=NAMES,
     )
     with path.open() as f:
@@ -414,6 +447,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
             image_pattern="x{index}",
             light_directions_camera=directions(),
             light_positions=positions,
+            light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
             joint_names=NAMES,
         )
 

@@ -95,6 +95,7 @@ def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> 
     np.testing.assert_allclose(back.sample(t)[0], plan.trajectory.sample(t)[0], atol=2e-3)
     report = (folder / "report.md").read_text()
     assert "verification | passed" in report and "![path](path.png)" in report
+    assert "## Files and frames" in report and "x to the right of the image, y towards its top" in report
 
 
 def test_a_compressed_trajectory_is_refused(plan: optlight.Plan, tmp_path: Path) -> None:
@@ -185,7 +186,7 @@ def test_the_view_check_runs_on_every_plan_and_a_blocked_capture_is_refused(
         view=view_check_for(robot, plan.scene, plan.problem.light).check,
     )
     blocked = [v for v in report.violations if v.check == "view"]
-    assert blocked, "the default layout blocks the view at some capture (issue 11)"
+    assert blocked, "the default layout blocks the view at some capture"
     first = blocked[0]
     assert first.joint in {g.name for g in robot.model.frames} | {"light housing"}
     capture = int(first.message.split()[1])

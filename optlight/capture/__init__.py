@@ -1,4 +1,4 @@
-"""Cameras in the loop (DESIGN §11): a light pose in, a captured image and its exposure out.
+"""Cameras in the loop (docs/design.md §11): a light pose in, a captured image and its exposure out.
 
 A :class:`CaptureCamera` has one method, ``capture(light_position, index) -> Capture``. Three
 implementations:

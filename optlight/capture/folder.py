@@ -7,8 +7,11 @@ light at a is the row whose ``light_position_*_m`` is nearest to a, within ``tol
 values x ∈ [0, 1] (full scale 255 or 65535) are linearised by the given response,
 I = s·x^γ (γ = ``response_gamma``, 1 for a linear camera or a raw file), into the renderer's units.
 
-Every file is checked when the camera is made: a missing file, or one of another size than the
-camera's, is a one-line :class:`~optlight.errors.ProblemError` naming the file.
+The image files may lie in another folder than captures.csv (``images``). Everything is checked
+when the camera is made, each refusal a one-line :class:`~optlight.errors.ProblemError` naming the
+file: a row without an image name, two rows naming the same image, two rows whose lights are within
+2·``tolerance_m`` of each other (a capture could match either), a missing file, one of another size
+than the camera's.
 """
 
 from __future__ import annotations
@@ -48,19 +51,45 @@ class FolderCamera:
         saturation: float = 1.0,
         response_gamma: float = 1.0,
         tolerance_m: float = 1e-3,
+        images: str | Path | None = None,
     ) -> None:
         self.folder = Path(folder)
+        self.images = self.folder if images is None else Path(images)
         self.camera = camera
         self.saturation = float(saturation)
         self.response_gamma = float(response_gamma)
         self.tolerance_m = float(tolerance_m)
         self.csv = self.folder / "captures.csv"
         self.names, self.positions = read_captures_csv(self.csv)
+        self._check_rows()
         for row, name in enumerate(self.names):
             self._check_file(row, name)
 
+    def _check_rows(self) -> None:
+        """Refuse rows no capture can be matched to unambiguously: no image name, a name two rows
+        give, lights closer than ``tolerance_m``."""
+        seen: dict[str, int] = {}
+        for row, name in enumerate(self.names):
+            if not name.strip():
+                raise ProblemError(str(self.csv), "image", f"an image file name on row {row}", name)
+            if name in seen:
+                raise ProblemError(
+                    str(self.csv), "image", "one row per image file", f"{name} on rows {seen[name]} and {row}"
+                )
+            seen[name] = row
+        gaps = np.linalg.norm(self.positions[:, None] - self.positions[None], axis=2)
+        close = np.argwhere(np.triu(gaps <= 2 * self.tolerance_m, k=1))  # a light within tolerance of both
+        if len(close):
+            a, b = close[0]
+            raise ProblemError(
+                str(self.csv),
+                "light_position_*_m",
+                f"lights more than {2e3 * self.tolerance_m:g} mm apart (a capture matches one row)",
+                f"rows {a} and {b} {1e3 * gaps[a, b]:.2g} mm apart",
+            )
+
     def _check_file(self, row: int, name: str) -> Path:
-        path = self.folder / name
+        path = self.images / name
         if not path.is_file():
             raise ProblemError(str(path), "", f"the image file row {row} of {self.csv.name} names", "no such file")
         try:

@@ -1,7 +1,7 @@
 """The physically based camera: Mitsuba 3 renders the model's mesh in the world of ``[world]``.
 
 Mitsuba is an optional dependency (``pip install 'optlight[mitsuba]'``). The variant is chosen at
-run time (DESIGN §7): ``llvm_ad_rgb`` when Debian's LLVM 19 library is found (``DRJIT_LIBLLVM_PATH``
+run time (docs/design.md §7): ``llvm_ad_rgb`` when Debian's LLVM 19 library is found (``DRJIT_LIBLLVM_PATH``
 is set to it unless already set), ``scalar_rgb`` otherwise; the system's LLVM 14/15 crash the LLVM
 variant, so it is never tried without LLVM 19.
 

@@ -1,4 +1,4 @@
-"""The robot's environment (issue 7): obstacles, self-collision and the camera's view of the object.
+"""The robot's environment: obstacles, self-collision and the camera's view of the object.
 
 :class:`Environment` is what the planners and the verifier use::
 

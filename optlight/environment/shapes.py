@@ -15,7 +15,7 @@ more than ε²/(2|·|) (negligible) and keeps gradients finite:
 
 Each sd is 1-Lipschitz, so sd(p) ≥ sd(o) − |p − o| bounds it from any point o (used to drop pairs
 that can never come close). :meth:`coal_geometry` and :attr:`placement` give the exact shape for
-coal (DESIGN §7: pinocchio's GeometryModel), in the world frame.
+coal (docs/design.md §8: pinocchio's GeometryModel), in the world frame.
 
 The view cone (:class:`ViewCone`) is the cone with apex at the camera centre C, axis u = (O − C)/d
 (d = |O − C|), half-angle α = asin(R/d) + margin around the object's bounding sphere (centre O,

@@ -5,7 +5,7 @@ its acceleration steps between gridpoints: unbounded jerk, which a Franka contro
 (``joint_motion_generator_acceleration_discontinuity``) and which ROS 2's quintic interpolation
 cannot follow. Here every landmark-to-landmark segment, which starts and ends at rest, is timed by a
 jerk-limited profile of its path parameter, computed by ruckig (its free version plans state to state,
-which is all a rest-to-rest segment needs; DESIGN §7).
+which is all a rest-to-rest segment needs; docs/design.md §7).
 
 **Path.** The same geometric path as TOPPRA's: the not-a-knot cubic spline q(s) through the
 waypoints over the cumulative chord length s ∈ [0, L] (:func:`optlight.planning.timing.chord_path`).

@@ -1,7 +1,7 @@
-"""Light sets (DESIGN §10): objectives that score N lights together, and their design.
+"""Light sets (docs/design.md §10): objectives that score N lights together, and their design.
 
 A light set is N unit directions ``d_i`` from the object centre O towards the lights, in the light
-sphere's frame S (DESIGN §2: ``z_S`` towards the camera, so zenith 0 is frontal light). The decision
+sphere's frame S (docs/design.md §2: ``z_S`` towards the camera, so zenith 0 is frontal light). The decision
 variables are the angles ``x = (θ_1 … θ_N, φ_1 … φ_N)`` (rad) with
 ``d_i = (sinθ_i cosφ_i, sinθ_i sinφ_i, cosθ_i)``, each zenith on the allowed cap
 ``θ_min ≤ θ_i ≤ θ_max`` (:class:`Cap`). ``D`` is the N×3 matrix whose rows are the ``d_i``.

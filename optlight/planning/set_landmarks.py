@@ -1,4 +1,4 @@
-"""A light set as the pipeline's landmarks (issue 12): design, map, order and report.
+"""A light set as the pipeline's landmarks: design, map, order and report.
 
 When ``[lightset] kind`` is not "none", the landmark stage designs the set instead of the
 per-azimuth search (:mod:`optlight.planning.lightsets`):

@@ -1,4 +1,4 @@
-"""Time-optimal timing of a joint-space path through the landmarks (DESIGN §6), with TOPPRA.
+"""Time-optimal timing of a joint-space path through the landmarks (docs/design.md §6), with TOPPRA.
 
 This is the only module of optlight that imports ``toppra`` (upstream may drop its Python package);
 everything else sees a :class:`Trajectory`.

@@ -1,9 +1,9 @@
-"""The trajectory NLP (DESIGN §6): joint angles at every path knot, built once, solved many times.
+"""The trajectory NLP (docs/design.md §6): joint angles at every path knot, built once, solved many times.
 
 Variables θ_0 … θ_{K−1} (joint angles, rad). Constraints per knot k, with a_k, R_k the light
 position and rotation from the symbolic forward kinematics:
 
-- h(θ_k) = R_kᵀ (O − a_k) − [0, 0, b] = 0 (on the sphere, aimed at O; DESIGN §3);
+- h(θ_k) = R_kᵀ (O − a_k) − [0, 0, b] = 0 (on the sphere, aimed at O; docs/design.md §3);
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
@@ -347,9 +347,9 @@ def knot_cost(setup: Setup, theta: Array) -> float:
 _Result = TypeVar("_Result")
 
 #: Clearance rows below this (m) at a knot (or at one next to it) join the trajectory NLP
-#: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. 0.15 m before the
-#: rows were chosen knot by knot: 0.1 m took half the NLP time on the obstacle problems (collision
-#: 1.1 → 0.55 s, the scaling benchmark's 144 captures among 10 obstacles 32 → 13 s).
+#: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. Chosen knot by knot,
+#: 0.1 m halves the NLP time on the obstacle problems against 0.15 m; a row left out that the
+#: solution breaks still joins (:data:`ACTIVE_ROUNDS`).
 ACTIVE_DISTANCE = 0.1
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
@@ -374,10 +374,10 @@ def optimize_knots(
     L-BFGS did not converge in 300 iterations on the collision problem.
 
     One solve, from the per-knot IK: its capture postures are the placement's, clear with a margin.
-    (A continuation through the optimum without the environment was tried first until 29 Nov: that
-    optimum moves the capture postures into the view cone or the obstacles, and the constrained solve
-    from it failed on five of the ten built-in problems — default, collision, face_ur5, sphere_xarm7,
-    rti_dome — where the one from the per-knot IK succeeded on all ten, in less time.)
+    (Not a continuation through the optimum without the environment: that optimum moves the capture
+    postures into the view cone or the obstacles, and the constrained solve from it fails on half of
+    the built-in problems — default, collision, face_ur5, sphere_xarm7, rti_dome — where the one
+    from the per-knot IK succeeds on all of them, in less time.)
 
     When those solves fail, they run again with IPOPT's initial barrier parameter
     :data:`WARM_MU_INIT` instead of its default 0.1: the warm start is feasible or nearly, with rows a
@@ -391,11 +391,10 @@ def optimize_knots(
     to be found infeasible (photometric_stereo: 245 more iterations, 4 s). The retry also tells
     IPOPT to expect an infeasible problem (restoration sooner, left only on a real reduction): most
     retries that fail are windows the fallbacks of :func:`~optlight.pipeline.optimize_window` then
-    solve, and on the scaling benchmark's 576 captures among 3 obstacles its five failing retries took
-    303 iterations instead of 583 (the NLP stage 24.0 -> 21.8 s), every solve that succeeded taking the
-    same iterations to the same plan. Not the first try: there it changed face_ur5's way (83 -> 50
-    iterations) to knots that held a capture's light at the antipode of its landmark (0.8 m away:
-    the pin rows' other root on the sphere), which verification refused.
+    solve, and so those retries give up in about half the iterations, while every solve that
+    succeeds takes the same iterations to the same plan. Not the first try: there it sends
+    face_ur5's first solve to knots that hold a capture's light at the antipode of its landmark
+    (0.8 m away: the pin rows' other root on the sphere), which verification refuses.
 
     Nor with a ``fallback``: a warm start whose IK jumped branches between two knots (a step beyond
     ``max_step_rad``) or put the arm into an obstacle at one is not near the feasible set either, and

@@ -4,7 +4,7 @@
   URDF, hand joints locked, base placement applied, ``flange`` and ``light`` frames added, joint angles
   θ (one per joint) as the coordinates the rest of optlight uses.
 - :mod:`.kinematics`: the CasADi mirror of pinocchio's forward kinematics
-  (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (DESIGN §3) and the
+  (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (docs/design.md §3) and the
   light's sphere coordinates :func:`light_angles`.
 - :func:`generalized_ik` (:mod:`.ik`, tasks in :mod:`.tasks`): δθ = J# e + (I − J⁺J) γ.
 """

@@ -9,7 +9,7 @@ A :class:`Robot` is a pinocchio model of the arm that carries the light, with
   world frame W;
 - two frames added at the end of the model: ``flange`` = the robot's tool frame, rotated where needed
   so that its +z points out of the tool, and ``light`` = ``flange · T(light_offset_m, light_rpy_deg)``.
-  The light emits along +z of ``light`` (DESIGN §2).
+  The light emits along +z of ``light`` (docs/design.md §2).
 
 **Joint coordinates.** The rest of optlight works with joint *angles* θ ∈ Rⁿ, n = ``model.nv``, one
 per joint, in URDF joint order. Pinocchio stores a continuous joint (kinova joints 1, 4, 6) as
@@ -405,8 +405,8 @@ class Robot:
         Collision meshes are read from the URDF's packages (distances are taken on them). Visual
         meshes are only drawn, by the preview, which reads each file itself
         (:mod:`optlight.viz.meshes`): by default they are not read (:func:`_unread_visual_meshes`;
-        the Panda's COLLADA files took 0.18 s to read into coal, for nothing). ``read_meshes=True``
-        reads them too, into axis-aligned bounding-box trees (0.2 s instead of 0.5 s with the
+        reading the Panda's COLLADA files into coal costs 0.18 s, for nothing). ``read_meshes=True``
+        reads them too, into axis-aligned bounding-box trees (less than half the time of the
         default OBBRSS trees), as the check of a user URDF does."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
         dirs = [str(p) for p in self.package_dirs]

@@ -215,8 +215,8 @@ def contact_sheet_figure(
     landmark's zenith, an arrow and the capture's.
 
     Drawn as images and labels on one axes spanning the figure, laid out in inches
-    (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
-    36 landmarks (axes, ticks, titles and the tight bounding box of each), this about 0.3 s."""
+    (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, would take about five
+    times as long to draw for 36 landmarks (axes, ticks, titles and the tight bounding box of each)."""
     from matplotlib.figure import Figure
 
     n = len(landmarks)
