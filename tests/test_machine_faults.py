@@ -232,16 +232,19 @@ def locked_out(tmp: Path) -> None:
 
 
 def latin1_captures(tmp: Path) -> None:
-    """A captures.csv in Latin-1 (an image name with é), for the folder camera: one line naming the
-    file, the line and the byte."""
-    images = tmp / "images"
-    images.mkdir()
-    header = "image,light_position_x_m,light_position_y_m,light_position_z_m\n"
-    (images / "captures.csv").write_bytes((header + "caf\xe9_000.png,0.5,0.0,0.8\n").encode("latin-1"))
+    """The folder camera's captures.csv saved again in Latin-1 (an image name with é) between two
+    rounds: the next round is one line naming the file, the line and the byte, and changes nothing."""
     problem = write_problem(tmp, "")
-    run = cli("acquire", problem, "--camera", "folder", "--images", str(images), "--out", str(tmp / "out"), cwd=tmp)
-    one_line(run, str(images / "captures.csv"), "UTF-8", "0xe9 at line 2, byte 4")
-    assert not (tmp / "out").exists()
+    out = tmp / "out"
+    assert cli("acquire", problem, "--camera", "folder", "--out", str(out), cwd=tmp).returncode == 0
+    table = out / "round_00" / "captures.csv"
+    lines = table.read_text(encoding="utf-8").splitlines()
+    lines[1] = lines[1].replace("r00_000.png", "caf\xe9_000.png")
+    table.write_bytes("\n".join(lines).encode("latin-1"))
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    run = cli("acquire", problem, "--camera", "folder", "--out", str(out), cwd=tmp)
+    one_line(run, "round_00/captures.csv", "UTF-8", "byte 0xe9 at line 2")
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
 
 @contextmanager
