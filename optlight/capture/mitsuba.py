@@ -130,6 +130,7 @@ class MitsubaCamera:
         return {"type": "principled", "base_color": reflectance, "roughness": w.roughness, "specular": w.specular}
 
     def _roughplastic(self, reflectance: dict[str, Any]) -> dict[str, Any]:
+        """Mitsuba's roughplastic (GGX, α = roughness) with the diffuse ``reflectance``."""
         w = self.world
         return {
             "type": "roughplastic",
@@ -139,9 +140,10 @@ class MitsubaCamera:
             "specular_reflectance": {"type": "rgb", "value": [w.specular] * 3},
         }
 
-    def _vertex_bsdf(self, albedo: Array) -> dict[str, Any]:
-        """The world's BSDF with the per-vertex diffuse ``albedo`` (N,) of the mesh attributes
-        ``vertex_color`` (3 channels) and ``vertex_weight`` (albedo / its largest value, 1 channel).
+    def _vertex_bsdf(self, top: float) -> dict[str, Any]:
+        """The world's BSDF with the per-vertex diffuse albedo of the mesh attribute ``vertex_color``
+        (3 channels); for roughplastic, of ``vertex_weight`` (1 channel): the albedo over its largest
+        value ``top`` (> 0).
 
         Mitsuba's roughplastic takes no vertex colours: it weighs its specular and diffuse samples by
         the reflectance texture's mean, which a mesh attribute does not have. Its BSDF (the linear
@@ -150,7 +152,6 @@ class MitsubaCamera:
         reflectance, a ``blendbsdf`` weighted by ``vertex_weight``."""
         if self.world.bsdf != "roughplastic":
             return self._bsdf({"type": "mesh_attribute", "name": "vertex_color"})
-        top = max(float(np.max(albedo, initial=0.0)), 1e-12)
         return {
             "type": "blendbsdf",
             "weight": {"type": "mesh_attribute", "name": "vertex_weight"},
@@ -176,8 +177,9 @@ class MitsubaCamera:
         vector = (lambda x: x) if mi.variant().startswith("scalar") else mi.Float
         index = (lambda x: x) if mi.variant().startswith("scalar") else mi.UInt32
         albedo = world_albedo(mesh.vertices, obj.albedo, w)
+        top = max(float(np.max(albedo, initial=0.0)), 1e-12)
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict(self._vertex_bsdf(albedo))
+        props["bsdf"] = mi.load_dict(self._vertex_bsdf(top))
         shape = mi.Mesh("object", len(mesh.vertices), len(mesh.faces), props, has_vertex_normals=True)
         params = mi.traverse(shape)
         params["vertex_positions"] = vector(np.asarray(mesh.vertices, np.float32).ravel())
@@ -185,8 +187,8 @@ class MitsubaCamera:
         params["vertex_normals"] = vector(np.asarray(mesh.vertex_normals, np.float32).ravel())
         params.update()
         shape.add_attribute("vertex_color", 3, vector(np.repeat(albedo, 3).astype(np.float32)))
-        weight = albedo / max(float(np.max(albedo, initial=0.0)), 1e-12)
-        shape.add_attribute("vertex_weight", 1, vector(weight.astype(np.float32)))
+        if w.bsdf == "roughplastic":
+            shape.add_attribute("vertex_weight", 1, vector((albedo / top).astype(np.float32)))
         return shape
 
     def _emitter(self, real: Array) -> dict[str, Any]:
