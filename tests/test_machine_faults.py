@@ -231,6 +231,29 @@ def locked_out(tmp: Path) -> None:
     solved(cli("solve", problem, "--out", str(out), cwd=tmp), out)
 
 
+def killed_holder(tmp: Path) -> None:
+    """A process that holds the lock of an output file and is then killed (SIGKILL: no cleanup of
+    its own): while it lives `render` into that file is refused; once it is dead the same command
+    writes the file, no lock file or stale lock left behind."""
+    png = tmp / "face.png"
+    render = ("render", "default", "--zenith", "30", "--azimuth", "90", "--out", str(png))
+    holder = subprocess.Popen(
+        [sys.executable, "-c", f"import sys; from optlight import locks; locks.acquire({str(png)!r}); print(1, flush=True); sys.stdin.read()"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert holder.stdout is not None and holder.stdout.readline() == "1\n"  # it holds the lock
+        one_line(cli(*render, cwd=tmp), f"another optlight run is writing {png}")
+        assert list(tmp.iterdir()) == []
+    finally:
+        holder.kill()
+        holder.communicate()
+    assert cli(*render, cwd=tmp).returncode == 0
+    assert [p.name for p in tmp.iterdir()] == ["face.png"]
+
+
 def latin1_captures(tmp: Path) -> None:
     """The folder camera's captures.csv saved again in Latin-1 (an image name with é) between two
     rounds: the next round is one line naming the file, the line and the byte, and changes nothing."""
@@ -314,6 +337,7 @@ FAULTS = [
     Fault("a user arm of fewer than 5 joints", few_joints),
     Fault("a full disk (a file size limit)", full_disk),
     Fault("another run writing --out", locked_out),
+    Fault("a killed run's lock", killed_holder),
     Fault("a captures.csv that is not UTF-8", latin1_captures),
     Fault("--scheduler at a server that is not Dask", not_dask),
     Fault("--scheduler at a server that says nothing", silent_server),
