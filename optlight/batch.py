@@ -15,9 +15,10 @@ as dotted problem-file keys (``robot.base_position_m``, ``object.kind``, ``landm
     label = "close"              # optional: names the row's folder
     "robot.base_position_m" = [0.1, 0.0, 0.0]
 
-The spec is checked whole before any work starts: every row's problem is built and validated like a
-problem file, and a mistake is a :class:`~optlight.errors.ProblemError` naming the batch file and the
-key (``grid.robot.name[1]``, ``rows[2].landmarks.count``).
+The spec is checked whole before any work starts: the rows are counted (at most :data:`MAX_ROWS`),
+then every row's problem is built and validated like a problem file, and a mistake is a
+:class:`~optlight.errors.ProblemError` naming the batch file and the key (``grid.robot.name[1]``,
+``rows[2].landmarks.count``).
 
 Each row is one task, ``optlight.solve(problem)`` then ``plan.save(folder)`` on a worker
 (:func:`solve_row`), into ``OUT/plans/<row>/``: the workers of a local cluster write there
@@ -75,13 +76,16 @@ from optlight.export import MANIFEST, check_output_folder, write_folder, writes_
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
-from optlight.threads import usable_cores
+from optlight.threads import WORKERS_PER_CORE, max_local_workers, usable_cores
 
 if TYPE_CHECKING:
     from distributed import Client
 
 #: Top-level keys of a batch spec.
 SPEC_KEYS = ("description", "problem", "preview", "grid", "rows")
+#: Most rows of one batch: each row's problem is built and checked before the batch starts (~ms each),
+#: and each row is a folder of results; split a larger study into several batches.
+MAX_ROWS = 10_000
 #: Seconds to wait for a remote scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
 #: The part of :data:`CONNECT_TIMEOUT_S` spent trying to connect, before the scheduler must answer.
@@ -171,6 +175,16 @@ def batch_spec_from_dict(data: Mapping[str, Any], source: Path | None = None) ->
     listed = data.get("rows", [{}])
     if not isinstance(listed, list) or not listed or not all(isinstance(r, dict) for r in listed):
         raise ProblemError(file, "rows", "a non-empty array of tables ([[rows]])", listed)
+    count = len(listed) * math.prod(len(v) for v in axes.values())
+    if count > MAX_ROWS:  # counted before any row's problem is built
+        lengths = " × ".join(f"{len(v)} ({k})" for k, v in axes.items())
+        raise ProblemError(
+            file,
+            "grid" if axes else "rows",
+            f"at most {MAX_ROWS} rows, the grid's list lengths multiplied and times the [[rows]] "
+            f"({lengths or 'no grid'} × {len(listed)} rows)",
+            count,
+        )
 
     rows: list[BatchRow] = []
     seen: dict[str, str] = {}
@@ -582,8 +596,11 @@ def dask_client(
     try:
         if scheduler is None:
             n = workers if workers is not None else default_workers()
-            if n < 1:
-                raise OptlightError(f"a local cluster needs at least 1 worker, got {n}")
+            if not 1 <= n <= max_local_workers():
+                raise OptlightError(
+                    f"a local cluster has 1 to {max_local_workers()} workers ({WORKERS_PER_CORE} per "
+                    f"usable core of this machine), got {n}"
+                )
             cluster = LocalCluster(
                 n_workers=n,
                 threads_per_worker=1,  # IPOPT and the renderer hold the GIL: parallel means processes

@@ -30,14 +30,16 @@ import numpy as np
 
 from optlight import interrupts, locks
 from optlight.errors import OptlightError, UsageError, VerificationError
-from optlight.spec import available_problems, load_problem, resolve_problem_path
+from optlight.spec import Problem, available_problems, load_problem, resolve_problem_path
+from optlight.threads import WORKERS_PER_CORE, max_local_workers
 
 #: What ``--force`` allows, as the output policy's errors say it.
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
-#: Most worker processes of a local cluster (``batch``, ``cell``).
-MAX_WORKERS = 1024
+#: Most cells of an ``optlight reach`` grid: one generalized IK solve (and a clear-posture search)
+#: each, a few milliseconds to a second when the cell is out of reach.
+MAX_REACH_CELLS = 20_000
 #: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
 #: import can break a library for the rest of the run (trimesh catches it while importing an optional
 #: part and leaves an error wrapper where a class should be).
@@ -75,11 +77,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_render(args: argparse.Namespace) -> int:
     from optlight.export import check_output_file, write_file
     from optlight.scene import Scene
-    from optlight.viz.images import save_gray_png
+    from optlight.viz.images import save_gray_png, written_by_optlight
 
     if Path(args.out).suffix.lower() != ".png":
         raise UsageError("--out", f"{args.out}: expected a .png file name")
-    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)
+    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE, ours=written_by_optlight)
     problem = load_problem(args.problem)
     scene = Scene.from_problem(problem)  # all a render needs (and the check of the object and camera)
     position = scene.sphere.position(np.deg2rad(args.zenith), np.deg2rad(args.azimuth))
@@ -90,6 +92,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         overwrite=args.force,
         option="--out",
         force=FORCE,
+        ours=written_by_optlight,
     )
     print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
     return 0
@@ -232,6 +235,7 @@ def _cmd_reach(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
+    _check_reach_grid(problem, args.zenith_step, args.azimuth_step)
     setup = preflight(problem)
     result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     interrupts.check()
@@ -243,6 +247,24 @@ def _cmd_reach(args: argparse.Namespace) -> int:
         print(f"{100 * result.taken_fraction:.1f}% of it taken by the environment (collision or view)")
     print(f"wrote {png} and {js}")
     return 0
+
+
+def _check_reach_grid(problem: Problem, zenith_step: float, azimuth_step: float) -> None:
+    """Refuse a reachability grid of more than :data:`MAX_REACH_CELLS` cells (as
+    :func:`optlight.planning.reach.reachability_map` lays it over the cap), naming the smallest zenith
+    step that fits with this azimuth step."""
+    span = problem.light_sphere.zenith_max_deg - problem.light_sphere.zenith_min_deg
+    n_z = math.ceil(span / zenith_step - 1e-9) + 1
+    n_a = math.ceil(360.0 / azimuth_step - 1e-9)
+    if n_z * n_a <= MAX_REACH_CELLS:
+        return
+    rows = MAX_REACH_CELLS // n_a
+    fits = f"--zenith-step ≥ {span / (rows - 1):.3g} with this azimuth step" if rows >= 2 else "a larger --azimuth-step"
+    raise UsageError(
+        "--zenith-step",
+        f"a grid of at most {MAX_REACH_CELLS} cells (an IK solve each): {n_z} zenith × {n_a} azimuth cells "
+        f"over the cap's {span:g}° = {n_z * n_a}; give {fits}",
+    )
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
@@ -406,7 +428,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="light azimuth, degrees (90 = from above)",
     )
     p.add_argument("--out", required=True, help="output PNG file (not an existing one unless --force)")
-    p.add_argument("--force", action="store_true", help="replace an existing PNG file")
+    p.add_argument("--force", action="store_true", help="replace a PNG that optlight rendered there")
     p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
     p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
     p.add_argument(
@@ -436,9 +458,9 @@ def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--workers",
-        type=integer(1, MAX_WORKERS, "worker processes"),
+        type=integer(1, max_local_workers(), f"worker processes ({WORKERS_PER_CORE} per usable core here)"),
         metavar="N",
-        help="local cluster worker processes (default: one per core)",
+        help=f"local cluster worker processes (default: one per core; at most {WORKERS_PER_CORE} per core)",
     )
 
 

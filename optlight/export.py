@@ -19,7 +19,8 @@ written over files optlight did not write. The output policy (:func:`check_outpu
 - anything else that exists (a file, a folder holding files optlight did not write, a broken link)
   is refused with a one-line :class:`UsageError`, before any work when the caller checks first;
 - a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
-  existing file is replaced only with ``overwrite``, a folder never.
+  existing file is replaced only with ``overwrite`` and only when it is one optlight wrote (a PNG
+  with optlight's mark, :func:`optlight.viz.images.written_by_optlight`), a folder never.
 
 The final renames run with Ctrl-C deferred (:func:`optlight.interrupts.deferred`), so an output
 appears whole or not at all; until then an interrupt removes the staging folder or temporary file.
@@ -525,25 +526,37 @@ def write_folder(
 
 
 def check_output_file(
-    path: str | Path, *, overwrite: bool = False, option: str = "file", force: str = "overwrite=True"
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    option: str = "file",
+    force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
-    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`,
-    and :class:`OutputError` when another run is writing the file (as :func:`check_output_folder`)."""
+    and then only when ``ours(path)`` says optlight wrote it (when given), never a folder; the nearest
+    existing folder above it must be writable. Raises :class:`UsageError`, and :class:`OutputError`
+    when another run is writing the file (as :func:`check_output_folder`)."""
     out = Path(path)
     locks.acquire(out)
     try:
-        return _check_output_file(out, overwrite, option, force)
+        return _check_output_file(out, overwrite, option, force, ours)
     finally:
         locks.release(out)
 
 
-def _check_output_file(out: Path, overwrite: bool, option: str, force: str) -> OutputTarget:
+def _check_output_file(
+    out: Path, overwrite: bool, option: str, force: str, ours: Callable[[Path], bool] | None
+) -> OutputTarget:
     if out.is_dir():
         raise UsageError(option, f"{out} is a folder; give the path of the file to write")
     exists = out.exists() or out.is_symlink()
     if exists and not overwrite:
         raise UsageError(option, f"{out} exists; pass {force} to replace it")
+    if exists and ours is not None and (out.is_symlink() or not ours(out)):
+        raise UsageError(
+            option, f"{out} exists and optlight did not write it; {force} replaces only a file optlight wrote"
+        )
     anchor = _existing_ancestor(out, option)
     _probe(anchor, option)
     return OutputTarget(out, anchor, exists=exists)
@@ -556,12 +569,14 @@ def write_file(
     overwrite: bool = False,
     option: str = "file",
     force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> Path:
     """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
-    rename it to ``path`` (missing folders above it created then), following the output policy."""
+    rename it to ``path`` (missing folders above it created then), following the output policy
+    (``ours``: see :func:`check_output_file`)."""
     locks.acquire(path)  # held until the file is in place
     try:
-        target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+        target = check_output_file(path, overwrite=overwrite, option=option, force=force, ours=ours)
     except BaseException:
         locks.release(path)
         raise

@@ -69,7 +69,7 @@ from optlight.planning.timing import Trajectory, time_parameterize
 from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
 from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, check_trajectory_samples
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
 from optlight.viz.drawing import FigureWorker
@@ -159,6 +159,9 @@ def solve(
 
     with stage("timing"):
         trajectory = time_knots(setup, path, nlp.theta)
+        dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
+        # before it is sampled: its samples must fit in this machine's memory
+        check_trajectory_samples(setup.problem, setup.robot.n, trajectory.duration, dwell)
     if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
         figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
 

@@ -51,7 +51,9 @@ from optlight.spec import (
     SolverSpec,
     TrajectorySpec,
     check_memory,
+    check_trajectory_size,
     load_problem,
+    planned_captures,
 )
 
 Array = NDArray[np.float64]
@@ -109,6 +111,16 @@ class Setup:
             objective if search_scene is scene else Objective.from_problem(problem, search_scene)
         )
         robot = load_robot(problem)
+        limits = MotionLimits.of(robot, problem.robot.velocity_scale)
+        check_trajectory_size(
+            problem,
+            joints=robot.n,
+            reach_m=reach_bound(robot),
+            velocity=limits.velocity,
+            acceleration=limits.acceleration,
+            jerk=limits.jerk,
+            captures=planned_captures(problem),
+        )
         environment = (
             Environment.from_problem(problem, scene.mesh.vertices)
             if problem.environment.enabled or problem.view.mode != "off"
@@ -122,7 +134,7 @@ class Setup:
             objective=objective,
             search_objective=search_objective,
             robot=robot,
-            limits=MotionLimits.of(robot, problem.robot.velocity_scale),
+            limits=limits,
             environment=environment,
             ik=MappingProxyType(ik_settings(problem.solver)),
             start=start,
@@ -161,6 +173,28 @@ class Setup:
     def file(self) -> str:
         """The problem file's path for error messages ("<inline>" for a problem built in code)."""
         return str(self.problem.source) if self.problem.source else "<inline>"
+
+
+def reach_bound(robot: Robot) -> float:
+    """An upper bound R (m) of the distance from any joint's axis to the light, whatever the joint
+    angles: the lengths of the joint placements after the first joint and the light's placement in its
+    joint, added up along the chain, with each prismatic joint's longest stroke. A joint of speed q̇
+    moves the light by at most |q̇| R (revolute) or |q̇| (prismatic, counted as R ≥ 1 m)."""
+    model = robot.model
+    frame = model.frames[robot.light_frame_id]
+    total = float(np.linalg.norm(frame.placement.translation))
+    chain = []
+    joint = frame.parentJoint
+    while joint > 0:
+        chain.append(joint)
+        joint = model.parents[joint]
+    for j in chain[:-1]:  # the first joint's own placement does not move with any joint
+        total += float(np.linalg.norm(model.jointPlacements[j].translation))
+    for j in chain:
+        if "P" in model.joints[j].shortname().removeprefix("JointModel"):
+            q = model.joints[j].idx_q
+            total += float(max(abs(model.lowerPositionLimit[q]), abs(model.upperPositionLimit[q])))
+    return max(total, 1.0)
 
 
 def _search_scene(scene: Scene, resolution: int) -> Scene:

@@ -277,6 +277,13 @@ def test_folder_camera_refuses_rows_a_capture_cannot_be_matched_to(tmp_path: Pat
     write_csv(tmp_path, [("x.png", a), ("", b)])
     with pytest.raises(ProblemError, match="an image file name on row 1"):
         FolderCamera(tmp_path, scene.camera)
+    inner = tmp_path / "inner"  # a row naming a file outside the images' folder, which exists there
+    inner.mkdir()
+    write_capture_png(inner / "x.png", np.zeros((scene.camera.height, scene.camera.width)), 1.0)
+    write_csv(inner, [("x.png", a), ("../y.png", b)])
+    outside = r"captures\.csv: image: expected a file name in the images' folder on row 1"
+    with pytest.raises(ProblemError, match=outside):
+        FolderCamera(inner, scene.camera)
 
 
 def test_mitsuba_specular_highlights_are_left_out_of_the_fit() -> None:

@@ -9,7 +9,8 @@ I = s·x^γ (γ = ``response_gamma``, 1 for a linear camera or a raw file), into
 
 The image files may lie in another folder than captures.csv (``images``). Everything is checked
 when the camera is made, each refusal a one-line :class:`~optlight.errors.ProblemError` naming the
-file: a row without an image name, two rows naming the same image, two rows whose lights are within
+file: a row without an image name or with one outside the images' folder (a path separator, ``..``),
+two rows naming the same image, two rows whose lights are within
 2·``tolerance_m`` of each other (a capture could match either), a missing file, one of another size
 than the camera's.
 """
@@ -66,12 +67,16 @@ class FolderCamera:
             self._check_file(row, name)
 
     def _check_rows(self) -> None:
-        """Refuse rows no capture can be matched to unambiguously: no image name, a name two rows
-        give, lights closer than ``tolerance_m``."""
+        """Refuse rows no capture can be matched to unambiguously: no image name, a name outside the
+        images' folder (a path separator, ``..``), a name two rows give, lights closer than
+        ``tolerance_m``."""
         seen: dict[str, int] = {}
         for row, name in enumerate(self.names):
             if not name.strip():
                 raise ProblemError(str(self.csv), "image", f"an image file name on row {row}", name)
+            if any(c in name for c in "/\\") or ".." in name or name.startswith("~"):
+                where = f"a file name in the images' folder on row {row} (no / \\ or ..)"
+                raise ProblemError(str(self.csv), "image", where, name)
             if name in seen:
                 raise ProblemError(
                     str(self.csv), "image", "one row per image file", f"{name} on rows {seen[name]} and {row}"

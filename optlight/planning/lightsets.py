@@ -892,7 +892,33 @@ def grid_from_problem(problem: Problem) -> Grid:
     spec = problem.lightset
     file = str(problem.source) if problem.source else "<inline>"
     if spec.grid_deg is not None:
-        return grid_from_degrees(spec.grid_deg)
+        return _distinct_grid(grid_from_degrees(spec.grid_deg), file, "lightset.grid_deg", "grid_deg[{}]", 0)
     if spec.grid_file is not None:
-        return read_grid_file(problem.resolve(spec.grid_file), file, "lightset.grid_file")
+        key = "lightset.grid_file"
+        grid = read_grid_file(problem.resolve(spec.grid_file), file, key)
+        return _distinct_grid(grid, file, key, f"{Path(spec.grid_file).name} data row {{}}", 1)
     return yale_b_grid()
+
+
+#: Grid directions closer than this (rad) are the same light: one capture cannot stand for two.
+SAME_DIRECTION_RAD = 1e-9
+
+
+def _distinct_grid(grid: Grid, file: str, key: str, entry: str, first: int) -> Grid:
+    """``grid`` when no two of its directions are the same light (within :data:`SAME_DIRECTION_RAD`);
+    else a :class:`ProblemError` naming ``file``, ``key`` and the first two such entries (``entry``
+    formatted with their index counted from ``first``)."""
+    d = grid.directions
+    cross = np.linalg.norm(np.cross(d[:, None, :], d[None, :, :]), axis=2)
+    angle = np.arctan2(cross, d @ d.T)
+    same = np.argwhere(np.triu(angle <= SAME_DIRECTION_RAD, k=1))
+    if same.size:
+        i, j = same[0]
+        raise ProblemError(
+            file,
+            key,
+            "distinct light directions (a grid light is one capture)",
+            f"{entry.format(i + first)} ({grid.names[i]}) and {entry.format(j + first)} ({grid.names[j]}) "
+            "are the same direction",
+        )
+    return grid
