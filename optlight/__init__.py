@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from optlight.errors import (
     OptlightError,
+    OutputError,
     ProblemError,
     RobotError,
     SolverError,
@@ -118,6 +119,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "LightSphere",
     "OptlightError",
+    "OutputError",
     "Problem",
     "ProblemError",
     "RobotError",

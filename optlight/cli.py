@@ -28,7 +28,7 @@ from typing import NoReturn
 
 import numpy as np
 
-from optlight import interrupts
+from optlight import interrupts, locks
 from optlight.errors import OptlightError, UsageError, VerificationError
 from optlight.spec import Problem, available_problems, load_problem, resolve_problem_path
 from optlight.threads import WORKERS_PER_CORE, max_local_workers
@@ -543,7 +543,8 @@ def _run(argv: Sequence[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
         _import(MODULES.get(args.command, ()))
-        return int(args.func(args))
+        with locks.holding():  # the outputs the command checks stay locked until it ends
+            return int(args.func(args))
     except OptlightError as e:
         if interrupts.pending():  # it came of a Ctrl-C IPOPT swallowed (a failed NLP): the interrupt wins
             return _interrupted()

@@ -61,6 +61,11 @@ class UsageError(OptlightError):
         super().__init__(f"{option}: {message}")
 
 
+class OutputError(OptlightError):
+    """An output cannot be written: the disk is full, a file is too large, the folder is locked by
+    another run. Names the folder and the cause."""
+
+
 class RobotError(OptlightError):
     """A robot or frame cannot be loaded (unknown name, missing file, unknown frame)."""
 

@@ -57,12 +57,14 @@ from __future__ import annotations
 
 import csv
 import datetime
+import errno
 import importlib.metadata
 import json
 import os
 import shutil
 import uuid
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -72,8 +74,8 @@ import orjson
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from optlight import interrupts
-from optlight.errors import UsageError, VerificationError
+from optlight import interrupts, locks
+from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.motion import Trajectory
 from optlight.planning.waypoints import Waypoints
@@ -95,6 +97,12 @@ FOLLOW_JOINT_TRAJECTORY_GOAL = "follow_joint_trajectory_goal.yaml"
 GOAL_TIME_TOLERANCE_S = 0.5
 #: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
 STAGING_PREFIX = ".optlight-staging-"
+#: What a failed write's errno means, said before the system's own words.
+WRITE_FAILURES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EFBIG: "a file is larger than this system lets a process write",
+}
 #: The frame of every light direction optlight writes (captures.csv, lights.lp, light_directions.txt).
 LIGHT_FRAME = (
     "unit vector from the object towards the light; x to the right of the image, y towards its top, "
@@ -447,9 +455,20 @@ def check_output_folder(
     ``overwrite``). Raises :class:`UsageError` for an existing
     file or broken link, a non-empty folder without a valid manifest, an earlier output without
     ``overwrite``, and a location where nothing can be written (tried by creating and removing a
-    staging folder there). Writes nothing that stays.
+    staging folder there); :class:`OutputError` when another run is writing the folder (its lock,
+    :mod:`optlight.locks`, kept from here to the end of a command). Writes nothing that stays.
     """
     path = Path(folder)
+    locks.acquire(path)
+    try:
+        return _check_output_folder(path, overwrite, option, force, resume)
+    finally:
+        locks.release(path)
+
+
+def _check_output_folder(
+    path: Path, overwrite: bool, option: str, force: str, resume: str | None
+) -> OutputTarget:
     if path.is_symlink() and not path.exists():
         raise UsageError(option, f"{path} is a broken symbolic link; give a new or empty folder")
     if not path.exists():
@@ -500,12 +519,19 @@ def write_folder(
     one is, recorded in the manifest so that the next round may continue it (None: a finished output).
 
     The staging folder is removed when ``write`` raises or Ctrl-C arrives before the final renames;
-    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises, and
+    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises,
     :class:`UsageError` (nothing changed) when a file to write exists in the folder without being
-    listed in its manifest (it appeared after the check).
+    listed in its manifest (it appeared after the check), and :class:`OutputError` naming the
+    folder and the cause when the system refuses a write (a full disk, a file size limit).
     """
-    target = check_output_folder(folder, overwrite=overwrite, option=option, force=force, resume=resume)
+    locks.acquire(folder)  # held until the output is in place
+    try:
+        target = check_output_folder(folder, overwrite=overwrite, option=option, force=force, resume=resume)
+    except BaseException:
+        locks.release(folder)
+        raise
     staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
+    moving = False
     try:
         with interrupts.deferred():  # created, then removed by the finally below: never left behind
             staging.mkdir()
@@ -517,9 +543,14 @@ def write_folder(
         (staging / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
         interrupts.check()  # an interrupt a library swallowed while writing
         with interrupts.deferred():
+            moving = True
             _move_into_place(staging, target, names, option)
+    except OSError as e:
+        partial = "some of its files may be the new output's" if moving and target.exists else "nothing was written"
+        raise _write_error(target.path, e, staging, partial) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
+        locks.release(folder)
     return [target.path / f for f in files]
 
 
@@ -533,8 +564,19 @@ def check_output_file(
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
     and then only when ``ours(path)`` says optlight wrote it (when given), never a folder; the nearest
-    existing folder above it must be writable. Raises :class:`UsageError`."""
+    existing folder above it must be writable. Raises :class:`UsageError`, and :class:`OutputError`
+    when another run is writing the file (as :func:`check_output_folder`)."""
     out = Path(path)
+    locks.acquire(out)
+    try:
+        return _check_output_file(out, overwrite, option, force, ours)
+    finally:
+        locks.release(out)
+
+
+def _check_output_file(
+    out: Path, overwrite: bool, option: str, force: str, ours: Callable[[Path], bool] | None
+) -> OutputTarget:
     if out.is_dir():
         raise UsageError(option, f"{out} is a folder; give the path of the file to write")
     exists = out.exists() or out.is_symlink()
@@ -561,7 +603,12 @@ def write_file(
     """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
     rename it to ``path`` (missing folders above it created then), following the output policy
     (``ours``: see :func:`check_output_file`)."""
-    target = check_output_file(path, overwrite=overwrite, option=option, force=force, ours=ours)
+    locks.acquire(path)  # held until the file is in place
+    try:
+        target = check_output_file(path, overwrite=overwrite, option=option, force=force, ours=ours)
+    except BaseException:
+        locks.release(path)
+        raise
     out = target.path
     temporary = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}{out.suffix}"
     try:
@@ -570,9 +617,36 @@ def write_file(
         with interrupts.deferred():
             out.parent.mkdir(parents=True, exist_ok=True)
             os.replace(temporary, out)
+    except OSError as e:
+        raise _write_error(out, e, temporary) from None
     finally:
         temporary.unlink(missing_ok=True)
+        locks.release(path)
     return out
+
+
+@contextmanager
+def writes_into(folder: Path, kept: str) -> Iterator[None]:
+    """Writes into ``folder`` outside :func:`write_folder` (a batch's records and table, which a run
+    adds as it goes): a write the system refuses is an :class:`OutputError` naming the folder, the
+    cause and what is ``kept``."""
+    try:
+        yield
+    except OSError as e:
+        raise _write_error(folder, e, folder, kept) from None
+
+
+def _write_error(path: Path, error: OSError, within: Path, done: str = "nothing was written") -> OutputError:
+    """The one-line error for ``error``, met while writing the output ``path`` through ``within``
+    (the staging folder, the temporary file, the folder itself): the folder, the cause, the file it
+    was writing (relative to ``within``), and what was ``done``."""
+    cause = error.strerror or str(error)
+    if error.errno in WRITE_FAILURES:
+        cause = f"{WRITE_FAILURES[error.errno]} ({cause})"
+    if error.filename:
+        name = Path(os.fsdecode(error.filename))
+        cause += f" at {name.relative_to(within) if name.is_relative_to(within) and name != within else name}"
+    return OutputError(f"cannot write {path}: {cause}; {done}")
 
 
 def _existing_ancestor(path: Path, option: str) -> Path:

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from optlight.errors import UsageError, VerificationError
+from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.export import (
     MANIFEST,
     _yaml_float,
@@ -170,7 +170,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
     def broken() -> bytes:
         raise OSError("disk full")
 
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match=r"cannot write .*run: disk full; nothing was written"):
         write_results(
             tmp_path / "run",
             trajectory=traj,
@@ -306,7 +306,7 @@ def test_write_file_replaces_only_with_overwrite_and_never_a_folder(tmp_path) ->
         tmp.write_bytes(b"half")
         raise OSError("disk full")
 
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match=r"cannot write .*b.png: disk full; nothing was written"):
         write_file(path, broken, overwrite=True)
     assert path.read_bytes() == b"two" and sorted(p.name for p in path.parent.iterdir()) == ["b.png"]
 

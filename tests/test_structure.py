@@ -24,6 +24,7 @@ PACKAGE = ROOT / "optlight"
 #: trajectory NLP, timing) both live in planning, above the built setup and below verification.
 LAYERS: list[set[str]] = [
     {"errors", "jsondata", "interrupts", "cache", "threads"},
+    {"locks"},
     {"spec"},
     {"geometry", "motion"},
     {"scene", "robot"},

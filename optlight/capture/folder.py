@@ -18,6 +18,7 @@ than the camera's.
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -132,11 +133,21 @@ class FolderCamera:
 
 
 def read_captures_csv(path: Path) -> tuple[list[str], NDArray[np.float64]]:
-    """The image names and light positions (N, 3, m) of a captures.csv; errors name the file."""
+    """The image names and light positions (N, 3, m) of a captures.csv, UTF-8 text (a byte order
+    mark is skipped); errors name the file, and for text that is not UTF-8 the line and the byte."""
     if not path.is_file():
         raise ProblemError(str(path), "", "a captures.csv (as optlight solve or acquire writes it)", "no such file")
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        start = e.start + (3 if data.startswith(b"\xef\xbb\xbf") else 0)  # utf-8-sig reports from after the mark
+        line = data.count(b"\n", 0, start) + 1
+        column = start - (data.rfind(b"\n", 0, start) + 1) + 1
+        raise ProblemError(
+            str(path), "", "UTF-8 text", f"byte 0x{data[start]:02x} at line {line}, byte {column} of the line ({e.reason})"
+        ) from None
+    rows = list(csv.DictReader(io.StringIO(text, newline="")))
     columns = ("image", *POSITION_COLUMNS)
     if rows:
         missing = [c for c in columns if c not in rows[0]]

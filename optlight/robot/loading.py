@@ -102,6 +102,10 @@ DEFAULT_ACCELERATION_LIMIT = 2.0
 #: Where no jerk limit is published: the time (s) to reach the acceleration limit, J = a_max / ramp.
 DEFAULT_JERK_RAMP_S = 0.05
 
+#: The light's constraints at a capture (docs/design.md §3): h1–h3 (on the sphere, its axis through
+#: O) and the capture's zenith and azimuth. An arm with fewer joints meets them only by chance.
+LIGHT_CONSTRAINTS = 5
+
 #: How many folder levels below a ``ROS_PACKAGE_PATH`` entry :func:`find_package` looks for a package.
 PACKAGE_SEARCH_DEPTH = 3
 
@@ -661,8 +665,10 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
     A relative ``urdf`` path is resolved against the problem file (``Problem``) or the working
     directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file or an
     unsupported joint type, listing what is available; from a ``Problem``, a user URDF that does not
-    parse or whose meshes do not resolve, and an unknown frame, are :class:`ProblemError` naming
-    ``robot.urdf`` and ``robot.frame`` (from a spec or name, RobotError naming the key).
+    parse, whose meshes do not resolve or that has fewer joints than the light's
+    :data:`LIGHT_CONSTRAINTS` (the problem's robot is to be planned; a spec's may have fewer, for its
+    kinematics alone), and an unknown frame, are :class:`ProblemError` naming ``robot.urdf`` and
+    ``robot.frame`` (from a spec or name, RobotError naming the key).
     """
     file: str | None = None
     if isinstance(source, Problem):
@@ -736,7 +742,6 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             f"{spec.name}: unsupported joint types {', '.join(bad)}; optlight handles revolute, "
             "continuous and prismatic joints"
         )
-
     # Base placement: pre-multiply everything attached to the universe by T_WB.
     base = placement(spec.base_position_m, spec.base_rpy_deg)
     for jid in range(1, model.njoints):
@@ -753,6 +758,14 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if file is not None:
             raise ProblemError(file, "robot.frame", expected, frame_name)
         raise RobotError(f"robot.frame: expected {expected}, got {frame_name!r}")
+    if file is not None and model.nv < LIGHT_CONSTRAINTS:  # a problem's robot is to be planned
+        joints = ", ".join(model.names[j.id] for j in model.joints[1:])
+        raise ProblemError(
+            file,
+            "robot.urdf",
+            f"an arm with at least {LIGHT_CONSTRAINTS} joints for the light's {LIGHT_CONSTRAINTS} constraints "
+            f"(h1–h3, zenith, azimuth); {urdf_path.name} has {model.nv} ({joints})",
+        )
     tool = model.frames[_find_frame(model, frame_name, spec.name)]
     for taken in ("flange", "light"):
         if model.existFrame(taken):
