@@ -1020,6 +1020,11 @@ def problem_from_dict(data: dict[str, Any], source: Path | None = None) -> Probl
     file = str(source) if source else "<inline>"
     problem = _build(Problem, data, "", file)
     problem = dataclasses.replace(problem, source=source)
+    robot = data.get("robot", {})
+    if problem.robot.urdf is not None and "name" not in robot:  # a user arm is named by its file
+        problem = dataclasses.replace(
+            problem, robot=dataclasses.replace(problem.robot, name=Path(problem.robot.urdf).stem)
+        )
     _check_consistency(problem, file)
     return problem
 
