@@ -545,7 +545,8 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     sphere here, moving to or from the captures.
 
     The straight line in joint space, knots at most :data:`TRANSFER_STEP` apart per joint, when it
-    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``) at every knot,
+    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``, not the beam:
+    the light is not aimed at the object here) at every knot,
     by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
     (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the velocity limits) s.t. the rows ≥
     :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed, with the
@@ -563,7 +564,7 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     robot = setup.robot
 
     def rows(theta: Array) -> Array:
-        clearance, view_rows = environment.sphere_clearance(robot, theta)
+        clearance, view_rows = environment.sphere_clearance(robot, theta, beam=False)
         return np.concatenate([clearance, view_rows if view else np.zeros(0)])
 
     if all(rows(theta).min(initial=np.inf) >= TRANSFER_PADDING for theta in line[1:-1]):
@@ -575,7 +576,7 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
         rows = None if active is None else _rows_of(active)
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
-            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=rows)]
+            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, beam=False, clearance_rows=rows)]
         )
         if active is not None and rows is not None:  # the view rows, after the clearance rows, at every knot
             views = row_function.size1_out(0) - len(rows)
