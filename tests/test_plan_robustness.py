@@ -1,6 +1,7 @@
 """Cells the shipped problems do not cover plan and verify, or say why: the light's beam onto the
 object is planned around where the camera's view is (placement, set design, the trajectory NLP's
-captures)."""
+captures); a set designed over the reachable lights is designed on the lights the reachability map
+found clear, or says how many fit."""
 
 from __future__ import annotations
 
@@ -10,6 +11,17 @@ from conftest import reduced_problem
 
 import optlight
 from optlight.environment.view import view_check_for
+from optlight.errors import UnreachableError
+from optlight.planning.landmarks import LandmarkSet
+from optlight.planning.set_landmarks import (
+    CLEAR_MARGIN,
+    SetDesign,
+    allowed_cap,
+    clear_lights,
+    directions_of,
+    fitting_count,
+    landmarks_of_set,
+)
 from optlight.setup import Setup
 
 
@@ -73,3 +85,60 @@ def test_a_stereo_set_on_a_sphere_keeps_the_arm_out_of_the_beam() -> None:
     captures = plan.trajectory.capture_times
     report = view.check(plan.trajectory.sample(captures)[0], captures)
     assert len(report.captures) >= 8 and all(c.beam_blocked == 0.0 for c in report.captures)
+
+
+def _rti_ur10(**lightset: object) -> optlight.Problem:
+    """An RTI set of 12 lights on a face, UR10, a 65° cap on a 0.31 m sphere, designed over the
+    reachable lights (the default): the clear lights are a band of the cap."""
+    return optlight.problem_from_dict(
+        {
+            "object": {"kind": "face", "center_m": [0.599, -0.193, 0.243]},
+            "camera": {"position_m": [0.084, -0.688, 0.365], "width": 64, "height": 64, "fov_deg": 25.0},
+            "light_sphere": {"radius_m": 0.306, "zenith_max_deg": 64.8},
+            "robot": {"name": "ur10"},
+            "objective": {
+                "terms": [{"kind": "histogram", "distance": "emd2"}],
+                "reference": {"kind": "light", "zenith_deg": 30.0, "azimuth_deg": 90.0},
+            },
+            "lightset": {"kind": "rti", "count": 12, "starts": 2, **lightset},
+            "trajectory": {"order": "tour", "path": "free"},
+        }
+    )
+
+
+@pytest.fixture(scope="module")
+def rti_design() -> tuple[Setup, LandmarkSet, SetDesign]:
+    setup = Setup.from_problem(_rti_ur10())
+    return (setup, *landmarks_of_set(setup))
+
+
+@pytest.mark.slow
+def test_a_set_over_the_reachable_lights_is_designed_on_the_clear_cells(
+    rti_design: tuple[Setup, LandmarkSet, SetDesign],
+) -> None:
+    """From uniform starts IPOPT called the band infeasible and 3 of the 12 lights were designed where
+    the map found nothing clear (the placement then dropped them)."""
+    setup, found, design = rti_design
+    assert design.reach is not None and design.field is not None
+    directions = directions_of(setup, found.landmarks)
+    assert len(directions) == 12
+    assert (design.field.numpy(directions) >= CLEAR_MARGIN - 1e-6).all()
+    # each light is within a map step of a cell the map found clear (the field only smooths them)
+    cells = design.reach.directions[design.reach.clear.ravel()]
+    nearest = np.degrees(np.arccos(np.clip((directions @ cells.T).max(axis=1), -1.0, 1.0)))
+    assert nearest.max() <= 2.0 * setup.problem.lightset.reach_step_deg
+
+
+@pytest.mark.slow
+def test_too_few_clear_lights_for_the_set_says_how_many_fit(
+    rti_design: tuple[Setup, LandmarkSet, SetDesign],
+) -> None:
+    setup, _, design = rti_design
+    assert design.reach is not None and design.field is not None
+    pool = clear_lights(design.reach, design.field, allowed_cap(setup))
+    assert 12 <= len(pool) < 400
+    many = Setup.from_problem(_rti_ur10(count=400))
+    with pytest.raises(UnreachableError, match=rf"set \[lightset\] count = {len(pool)} \(or less\)"):
+        fitting_count(many, pool, design.reach)
+    partial = optlight.problem_from_dict({**_rti_ur10(count=400).to_dict(), "landmarks": {"allow_partial": True}})
+    assert fitting_count(Setup.from_problem(partial), pool, design.reach) == len(pool)
