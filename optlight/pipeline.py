@@ -66,7 +66,13 @@ from optlight.planning.set_landmarks import (
     tour_order,
 )
 from optlight.planning.timing import Trajectory, time_parameterize
-from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
+from optlight.planning.trajectory import (
+    TrajectoryNLPResult,
+    follow_planned_path,
+    knot_cost,
+    optimize_knots,
+    plan_transfer,
+)
 from optlight.report import landmark_jobs, motion_jobs
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -420,7 +426,9 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits."""
+    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits and, on the
+    sphere, within :data:`~optlight.planning.trajectory.PATH_DEVIATION_M` of the planned path
+    (:func:`~optlight.planning.trajectory.follow_planned_path`)."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
     retreat = (
@@ -428,7 +436,10 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
         if spec.return_home
         else None
     )
-    segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
+    segments = [
+        theta[s] if off else follow_planned_path(setup, theta[s])
+        for s, off in zip(path.segments(), path.transfers, strict=True)
+    ] or [theta[:1]]  # one landmark: its dwell
     timed: Callable[..., Trajectory] = (
         partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
         if spec.timing == "jerk_limited"

@@ -142,3 +142,41 @@ def test_too_few_clear_lights_for_the_set_says_how_many_fit(
         fitting_count(many, pool, design.reach)
     partial = optlight.problem_from_dict({**_rti_ur10(count=400).to_dict(), "landmarks": {"allow_partial": True}})
     assert fitting_count(Setup.from_problem(partial), pool, design.reach) == len(pool)
+
+
+def _zigzag_knots(setup: Setup, amplitude: float) -> np.ndarray:
+    """Knots of one segment on the sphere, lights 2° apart along a zenith-30° ring, whose postures
+    swing the panda's elbow back and forth in its self-motion (±``amplitude`` rad along the null
+    space of the light's 6-D Jacobian, then back onto the light by IK): every knot is exact, but the
+    joints move a long way between lights 2° apart, as they do where a plan turns the arm about the
+    light."""
+    robot, sphere = setup.robot, setup.sphere
+    knots: list[np.ndarray] = []
+    for k, azimuth in enumerate(range(0, 12, 2)):
+        start = robot.theta_ref
+        if knots:
+            null = np.linalg.svd(robot.light_jacobian(knots[-1]))[2][-1]
+            start = knots[-1] + (amplitude if k % 2 else -amplitude) * np.sign(null[0]) * null
+        target = sphere.position(np.radians(30.0), np.radians(azimuth))
+        ik = optlight.generalized_ik(robot, sphere, target, start, restarts=False, secondary=())
+        assert ik.success
+        knots.append(ik.theta)
+    return np.array(knots)
+
+
+def test_the_timed_path_keeps_to_the_planned_path_between_far_apart_postures(small_setup: Setup) -> None:
+    """The timing's joint-space spline between knots whose postures are far apart (and the joint-space
+    midpoints it adds to keep within the joint bounds) took the light 6 mm from the planned path:
+    the plan failed its own verification. Knots are now added on the path where it strays."""
+    from optlight.pipeline import time_knots, verify_knots
+    from optlight.planning.path import LightPath
+
+    theta = _zigzag_knots(small_setup, 1.3)
+    positions = small_setup.robot.light_positions(theta)
+    rotations = np.array([small_setup.robot.light_pose(q)[1] for q in theta])
+    directions = (positions - small_setup.sphere.center) / small_setup.sphere.radius
+    path = LightPath(directions, positions, rotations, np.arange(2), np.array([0, len(theta) - 1]), np.zeros(1, bool))
+    trajectory = time_knots(small_setup, path, theta)
+    report = verify_knots(small_setup, trajectory, positions[[0, -1]], theta, path.transfers)
+    check = report.checks["path"]
+    assert check.samples > 1000 and check.max_value <= 0.5 * check.limit

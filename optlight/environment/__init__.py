@@ -382,7 +382,7 @@ class Environment:
     def clearance_values(self, robot: Robot, thetas: ArrayLike) -> Array:
         """(K, m): the clearance rows of :meth:`sphere_clearance` (m) at each of ``thetas`` (K, n),
         rad; with no configuration, (0, m)."""
-        values = [self.sphere_clearance(robot, theta)[0] for theta in np.atleast_2d(thetas)]
+        values = [self.sphere_clearance(robot, theta, beam=False)[0] for theta in np.atleast_2d(thetas)]
         if values:
             return np.array(values)
         cm = self.collision_model(robot)

@@ -278,6 +278,11 @@ class ViewCone:
         return pin.SE3(rot, self.apex + 0.5 * self.length * self.axis)
 
 
+#: Largest R/d of the beam's half-angle asin(R/d): the light nearer the object than its bounding
+#: sphere (never at a capture; a configuration off the path may put it there) keeps a finite cone.
+BEAM_MAX_SINE = 0.99
+
+
 @dataclass(frozen=True)
 class BeamCone:
     """The light's beam onto the object: the cone from the light's emitting point a (the apex, which
@@ -286,7 +291,8 @@ class BeamCone:
     O and at a = ``skip`` cos α from the apex: the exact check casts the beam's rays from ``skip`` m
     beyond a (the housing's radius), and every point of the cone nearer than ``skip`` cos α along
     the axis is within ``skip`` of a. Whatever else is inside it stands between the light and the
-    lit side of the object. Signed distance: :func:`cone_signed_distance` (the view cone's)."""
+    lit side of the object. Signed distance: :func:`cone_signed_distance` (the view cone's); R/d is
+    capped at :data:`BEAM_MAX_SINE`."""
 
     center: Array
     radius: float
@@ -296,10 +302,8 @@ class BeamCone:
     def _cone(self, apex: Array) -> tuple[Array, float, float]:
         """(u, α, d) for the apex (3,) in m."""
         to_center = self.center - apex
-        d = float(np.linalg.norm(to_center))
-        if self.radius >= d:
-            raise ValueError(f"the light ({d:.3f} m from the centre) is inside the object's sphere")
-        return to_center / d, math.asin(self.radius / d) + self.margin, d
+        d = max(float(np.linalg.norm(to_center)), SMOOTHING_M)
+        return to_center / d, math.asin(min(self.radius / d, BEAM_MAX_SINE)) + self.margin, d
 
     def signed_distance(self, points: ArrayLike, apex: ArrayLike) -> Array:
         """sd (N,) in m of world points (N, 3) to the beam from ``apex`` (3,) (m); < 0 inside."""
@@ -310,6 +314,6 @@ class BeamCone:
     def signed_distance_sx(self, point: ca.SX, apex: ca.SX) -> ca.SX:
         """The same for CasADi 3×1 world points ``point`` and ``apex`` (the light's position)."""
         to_center = ca.DM(self.center) - apex
-        d = ca.sqrt(ca.sumsqr(to_center))
-        alpha = ca.asin(self.radius / d) + self.margin
+        d = ca.fmax(ca.sqrt(ca.sumsqr(to_center)), SMOOTHING_M)
+        alpha = ca.asin(ca.fmin(self.radius / d, BEAM_MAX_SINE)) + self.margin
         return cone_signed_distance_sx(point - apex, to_center / d, alpha, d, self.skip * ca.cos(alpha))

@@ -34,6 +34,7 @@ from typing import Any, TypeVar
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 
 from optlight.errors import IPOPT_ITERATION_LIMIT, SolverError, iteration_limit_error
 from optlight.geometry import LightSphere
@@ -52,9 +53,12 @@ from optlight.planning.nlp import (
     tangent_basis,
 )
 from optlight.planning.path import LightPath
+from optlight.planning.timing import chord_path
 from optlight.robot import light_residual
+from optlight.robot.ik import generalized_ik, ik_settings
 from optlight.setup import Setup
 from optlight.spec import SolverSpec
+from optlight.verify import Tolerances, distance_to_polyline
 
 Array = NDArray[np.float64]
 
@@ -642,3 +646,84 @@ def _thinned(knots: Array, step: float) -> Array:
     if kept[-1] != len(knots) - 1:
         kept.append(len(knots) - 1)
     return knots[kept]
+
+
+#: Largest distance (m) the timed path's light may stray from the planned path (the polyline of the
+#: knots' lights) between two knots of a segment on the sphere before a knot is added there: half the
+#: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`).
+PATH_DEVIATION_M = 0.5 * Tolerances().path_m
+#: Points per knot interval at which the spline's light is measured against the planned path.
+DEVIATION_SAMPLES = 8
+#: Rounds of knot insertion (each halves the intervals that still stray).
+MAX_PATH_REFINEMENTS = 5
+
+
+def follow_planned_path(setup: Setup, knots: Array) -> Array:
+    """The knots (K, n) (rad) of one segment on the sphere, with knots added where the path the
+    timing will follow strays from the planned one.
+
+    The timing follows the not-a-knot cubic spline through the knots in joint space
+    (:func:`~optlight.planning.timing.chord_path`); between two knots the light follows that
+    spline's forward kinematics, not the chord between the knots' lights, and where the joints move
+    a long way for a short light step it leaves the planned path; where the spline leaves the joint
+    bounds, chord_path adds the joint-space midpoint of two knots, whose light is off the path too.
+    So, per round: every waypoint whose light is more than :data:`PATH_DEVIATION_M` from the
+    polyline of the knots' lights is put back on it, and the spline is sampled at
+    :data:`DEVIATION_SAMPLES` points per interval; where its light is more than that from the
+    polyline, a waypoint is added at the interval's middle, put on it the same way. "Put on it":
+    the generalized IK (no restarts) from those joint angles to the light at the polyline's point
+    nearest their light, carried radially onto the sphere (within the sag ρ(1 − cos(Δ/2)) of the
+    chord between two knots Δ apart, 0.06 mm at 2°), aimed at O; kept when it converges within the
+    joint bounds. Halving an interval shrinks the spline's bulge about fourfold; at most
+    :data:`MAX_PATH_REFINEMENTS` rounds. What cannot be put back is left as it is (the verification
+    reports it)."""
+    planned = setup.robot.light_positions(knots)
+    bounds = (setup.limits.lower, setup.limits.upper)
+    w = knots
+    for _ in range(MAX_PATH_REFINEMENTS):
+        chord = chord_path(w, bounds)
+        if chord is None:
+            return w
+        s, w = chord
+        w = w.copy()
+        changed = False
+        for i in np.flatnonzero(distance_to_polyline(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
+            on_path = _onto_path(setup, w[i], planned)
+            if on_path is not None:
+                w[i], changed = on_path, True
+        if changed:
+            continue  # the spline through the corrected waypoints is measured in the next round
+        spline = CubicSpline(s, w, bc_type="not-a-knot")
+        tau = (np.arange(DEVIATION_SAMPLES) + 0.5) / DEVIATION_SAMPLES
+        between = s[:-1, None] + tau[None, :] * np.diff(s)[:, None]
+        lights = setup.robot.light_positions(spline(between.ravel()))
+        stray = distance_to_polyline(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
+        added = False
+        for i in np.flatnonzero(stray)[::-1]:  # from the end: the indices before stay valid
+            middle = _onto_path(setup, spline(0.5 * (s[i] + s[i + 1])), planned)
+            if middle is not None:
+                w, added = np.insert(w, i + 1, middle, axis=0), True
+        if not added:
+            return w
+    return w
+
+
+def _onto_path(setup: Setup, theta: Array, planned: Array) -> Array | None:
+    """Joint angles near ``theta`` (rad) whose light is on the planned path (the polyline through
+    ``planned`` (K, 3), m, carried onto the sphere), aimed at O, within the joint bounds
+    (:func:`follow_planned_path`); None when the IK does not converge there."""
+    robot, sphere = setup.robot, setup.sphere
+    target = _nearest_on_polyline(robot.light_positions(theta)[0], planned)
+    target = sphere.center + sphere.radius * (target - sphere.center) / np.linalg.norm(target - sphere.center)
+    settings = {**ik_settings(setup.solver), "secondary": ("joint_limits",)}
+    ik = generalized_ik(robot, sphere, target, theta, restarts=False, **settings)
+    inside = np.all((ik.theta >= setup.limits.lower) & (ik.theta <= setup.limits.upper))
+    return ik.theta if ik.success and inside else None
+
+
+def _nearest_on_polyline(point: Array, polyline: Array) -> Array:
+    """The point (3,) of the polyline through the vertices (K, 3) nearest ``point`` (3,) (m)."""
+    a, d = polyline[:-1], np.diff(polyline, axis=0)
+    c = np.clip(np.einsum("ij,ij->i", point - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+    nearest = a + c[:, None] * d
+    return nearest[np.argmin(np.linalg.norm(nearest - point, axis=1))]
