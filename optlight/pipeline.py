@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
-from optlight.errors import SolverError
+from optlight.errors import CaptureSolverError, SolverError
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
@@ -143,18 +143,36 @@ def solve(
     with stage("path"):
         order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
-        positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
-        path = capture_path(setup, positions, landmark_thetas)
+        path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
-    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures.any():
         notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
-        path, warm, nlp = optimize_path(
-            setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
-        )
+        while True:
+            try:
+                path, warm, nlp = optimize_path(
+                    setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
+                )
+                break
+            except CaptureSolverError as error:
+                if not setup.landmark_spec.allow_partial or len(visited) < 2:
+                    raise
+                k = hardest_capture(landmark_thetas, error.first, error.last)
+                lm = visited[k]
+                notes.append(
+                    f"dropped landmark {lm.index} (zenith {np.degrees(lm.zenith):.1f}°, azimuth "
+                    f"{np.degrees(lm.azimuth):.1f}°), capture {k} of the visiting order: the trajectory NLP "
+                    f"found no way {error}; of its captures this one needs the largest reconfiguration"
+                )
+                visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
+                path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
+                warm, failures = knot_ik(setup, path, landmark_thetas)
+    positions = np.array([lm.position for lm in visited])
+    lightset = (
+        set_summary(setup, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
+    )
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -330,7 +348,7 @@ def optimize_path(
     :func:`optimize_window`), and where it finds no way from there, it is solved again together with
     the window before it. Returns the path (with the transfers the windows needed), its warm start
     and the NLP's result over all knots; raises :class:`SolverError` naming the captures of the
-    window that failed. ``progress(done, total)`` after each window.
+    window that failed (:class:`CaptureSolverError`). ``progress(done, total)`` after each window.
 
     Why windows: one NLP over all knots needs as many iterations as its hardest stretch needs, for
     every knot; on the scaling benchmark's 576 captures among 3 obstacles it did not converge in
@@ -352,9 +370,9 @@ def optimize_path(
             except SolverError as e:
                 error = e
         else:
-            if len(windows) == 1:
-                raise error
-            raise SolverError(f"between captures {first} and {last} (visiting order): {error}") from error
+            raise CaptureSolverError(
+                f"between captures {first} and {last} (visiting order): {error}", first, last
+            ) from error
         warm[knots], theta[knots], transfers[start:last] = warm_window, result.theta, window.transfers
         results.append(result)
         if progress is not None:
@@ -403,6 +421,16 @@ def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -
         iterations=sum(r.iterations for r in results),
         time_s=sum(r.time_s for r in results),
     )
+
+
+def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
+    """Of the captures ``first`` … ``last`` (visiting order) with postures ``landmark_thetas`` (M, n),
+    rad, the one whose posture is farthest from its neighbours' (Σ over the segments before and after
+    it of the largest joint's change): the capture the trajectory NLP drops first when it finds no way
+    through them (``[landmarks] allow_partial``)."""
+    steps = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
+    around = np.concatenate([[0.0], steps]) + np.concatenate([steps, [0.0]])
+    return first + int(np.argmax(around[first : last + 1]))
 
 
 def unfollowed_segments(

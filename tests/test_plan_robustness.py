@@ -180,3 +180,48 @@ def test_the_timed_path_keeps_to_the_planned_path_between_far_apart_postures(sma
     report = verify_knots(small_setup, trajectory, positions[[0, -1]], theta, path.transfers)
     check = report.checks["path"]
     assert check.samples > 1000 and check.max_value <= 0.5 * check.limit
+
+
+def test_hardest_capture_is_the_one_farthest_from_its_neighbours() -> None:
+    from optlight.pipeline import hardest_capture
+
+    thetas = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 1.5], [0.2, 0.1], [0.3, 0.1]])
+    assert hardest_capture(thetas, 0, 4) == 2  # 1.5 rad before it, 1.4 after: a posture off its way
+    assert hardest_capture(thetas, 3, 4) == 3  # within the window only
+    assert hardest_capture(thetas[:1], 0, 0) == 0
+
+
+@pytest.mark.slow
+def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_with_allow_partial(
+    small_default: optlight.Problem, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the trajectory NLP finds no way (here: whenever the path holds all the placed captures),
+    the plan says between which captures and why; with [landmarks] allow_partial it drops the
+    capture that needs the largest reconfiguration and plans the rest."""
+    import optlight.pipeline as pipeline
+    from optlight.errors import CaptureSolverError, SolverError
+
+    real_path, real_knots = pipeline.capture_path, pipeline.optimize_knots
+    paths: list[int] = []  # captures of each path the pipeline plans
+
+    def counted_path(setup, positions, thetas):  # type: ignore[no-untyped-def]
+        paths.append(len(positions))
+        return real_path(setup, positions, thetas)
+
+    def fails_with_every_capture(setup, path, warm, fixed_start, **kwargs):  # type: ignore[no-untyped-def]
+        if len(paths) == 1:  # the first path, through every placed capture
+            raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
+        return real_knots(setup, path, warm, fixed_start, **kwargs)
+
+    monkeypatch.setattr(pipeline, "capture_path", counted_path)
+    monkeypatch.setattr(pipeline, "optimize_knots", fails_with_every_capture)
+    with pytest.raises(CaptureSolverError, match=r"between captures 0 and \d+ \(visiting order\).*Infeasible"):
+        optlight.solve(small_default)
+    paths.clear()
+    partial = optlight.problem_from_dict(
+        {**small_default.to_dict(), "landmarks": {**small_default.to_dict()["landmarks"], "allow_partial": True}}
+    )
+    with pytest.warns(UserWarning, match=r"dropped landmark \d+ .*capture \d+ of the visiting order: the "):
+        plan = optlight.solve(partial)
+    assert plan.verification.passed
+    assert len(paths) == 2 and paths[1] == paths[0] - 1 == len(plan.visited)
