@@ -70,6 +70,7 @@ from optlight.planning.trajectory import (
     TrajectoryNLPResult,
     follow_planned_path,
     knot_cost,
+    knots_on_arcs,
     optimize_knots,
     plan_transfer,
 )
@@ -182,12 +183,13 @@ def solve(
         )
 
     with stage("timing"):
-        trajectory = time_knots(setup, path, nlp.theta)
+        timed_path, timed_knots = knots_on_path(setup, path, nlp.theta)
+        trajectory = time_knots(setup, timed_path, timed_knots)
     if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
         figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
 
     with stage("verify"):
-        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
+        report = verify_knots(setup, trajectory, positions, timed_knots, timed_path.transfers)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -447,6 +449,35 @@ def unfollowed_segments(
         clearance = np.array([environment.sphere_clearance(setup.robot, q)[0].min() for q in warm])
         unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments])
     return unfollowed
+
+
+def knots_on_path(setup: Setup, path: LightPath, theta: Array) -> tuple[LightPath, Array]:
+    """The path and its knots ``theta`` (K, n) (rad) with knots added on the great-circle arcs of the
+    segments on the sphere where two knots' lights are far apart
+    (:func:`~optlight.planning.trajectory.knots_on_arcs`): the planned path the timing follows and
+    the verification measures against. The added knots' directions, positions and rotations are
+    their lights' (as are those of the other knots of their segment); the transfers' are kept."""
+    segments = path.segments()
+    refined = [theta[s] if off else knots_on_arcs(setup, theta[s]) for s, off in zip(segments, path.transfers, strict=True)]
+    if sum(len(k) for k in refined) == sum(s.stop - s.start for s in segments):
+        return path, theta
+    knots, directions, positions, rotations = [theta[:1]], [path.directions[:1]], [path.positions[:1]], [path.rotations[:1]]
+    for s, off, part in zip(segments, path.transfers, refined, strict=True):
+        if off:
+            poses = (path.directions[s], path.positions[s], path.rotations[s])
+        else:
+            a, r = zip(*(setup.robot.light_pose(q) for q in part), strict=True)
+            a_arr = np.array(a)
+            d = a_arr - setup.sphere.center
+            poses = (d / np.linalg.norm(d, axis=1, keepdims=True), a_arr, np.array(r))
+        knots.append(part[1:])
+        for out, values in zip((directions, positions, rotations), poses, strict=True):
+            out.append(values[1:])
+    landmark_knots = np.concatenate([[0], np.cumsum([len(k) - 1 for k in refined])]).astype(np.int64)
+    refined_path = LightPath(
+        np.vstack(directions), np.vstack(positions), np.concatenate(rotations), path.order, landmark_knots, path.transfers
+    )
+    return refined_path, np.vstack(knots)
 
 
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:

@@ -225,3 +225,32 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
         plan = optlight.solve(partial)
     assert plan.verification.passed
     assert len(paths) == 2 and paths[1] == paths[0] - 1 == len(plan.visited)
+
+
+def test_knots_far_apart_on_the_sphere_get_knots_on_their_arc(small_setup: Setup) -> None:
+    """The free path's NLP bounds the joints' steps, not the light's: two knots whose lights are 40°
+    apart leave a chord 24 mm inside the sphere, which the light (on the sphere) cannot follow, and
+    the plan failed its own verification on the path. Knots are added on the arc between them."""
+    from optlight.pipeline import knots_on_path, time_knots, verify_knots
+    from optlight.planning.path import LightPath
+
+    robot, sphere = small_setup.robot, small_setup.sphere
+    theta = [robot.theta_ref]
+    for azimuth in (60.0, 100.0):
+        target = sphere.position(np.radians(30.0), np.radians(azimuth))
+        ik = optlight.generalized_ik(robot, sphere, target, theta[-1], restarts=False)
+        assert ik.success
+        theta.append(ik.theta)
+    knots = np.array(theta[1:])
+    positions = robot.light_positions(knots)
+    rotations = np.array([robot.light_pose(q)[1] for q in knots])
+    directions = (positions - sphere.center) / sphere.radius
+    path = LightPath(directions, positions, rotations, np.arange(2), np.array([0, 1]), np.zeros(1, bool))
+    planned_path, planned = knots_on_path(small_setup, path, knots)
+    assert len(planned) > 2 and planned_path.landmark_knots.tolist() == [0, len(planned) - 1]
+    np.testing.assert_array_equal(planned[[0, -1]], knots)
+    lights = robot.light_positions(planned)
+    np.testing.assert_allclose(np.linalg.norm(lights - sphere.center, axis=1), sphere.radius, atol=1e-5)  # IK tol
+    trajectory = time_knots(small_setup, planned_path, planned)
+    report = verify_knots(small_setup, trajectory, positions, planned, planned_path.transfers)
+    assert report.checks["path"].max_value <= 0.5 * report.checks["path"].limit

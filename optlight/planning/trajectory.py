@@ -655,7 +655,7 @@ PATH_DEVIATION_M = 0.5 * Tolerances().path_m
 #: Points per knot interval at which the spline's light is measured against the planned path.
 DEVIATION_SAMPLES = 8
 #: Rounds of knot insertion (each halves the intervals that still stray).
-MAX_PATH_REFINEMENTS = 5
+MAX_PATH_REFINEMENTS = 6
 
 
 def follow_planned_path(setup: Setup, knots: Array) -> Array:
@@ -678,32 +678,34 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
     :data:`MAX_PATH_REFINEMENTS` rounds. What cannot be put back is left as it is (the verification
     reports it)."""
     planned = setup.robot.light_positions(knots)
+    if len(planned) < 2:
+        return knots
     bounds = (setup.limits.lower, setup.limits.upper)
     w = knots
     for _ in range(MAX_PATH_REFINEMENTS):
         chord = chord_path(w, bounds)
         if chord is None:
             return w
-        s, w = chord
-        w = w.copy()
+        w = chord[1].copy()
         changed = False
         for i in np.flatnonzero(distance_to_polyline(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
             on_path = _onto_path(setup, w[i], planned)
             if on_path is not None:
                 w[i], changed = on_path, True
-        if changed:
-            continue  # the spline through the corrected waypoints is measured in the next round
+        chord = chord_path(w)  # the parameter of the corrected waypoints
+        if chord is None:
+            return w
+        s, w = chord
         spline = CubicSpline(s, w, bc_type="not-a-knot")
         tau = (np.arange(DEVIATION_SAMPLES) + 0.5) / DEVIATION_SAMPLES
         between = s[:-1, None] + tau[None, :] * np.diff(s)[:, None]
         lights = setup.robot.light_positions(spline(between.ravel()))
         stray = distance_to_polyline(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
-        added = False
         for i in np.flatnonzero(stray)[::-1]:  # from the end: the indices before stay valid
             middle = _onto_path(setup, spline(0.5 * (s[i] + s[i + 1])), planned)
             if middle is not None:
-                w, added = np.insert(w, i + 1, middle, axis=0), True
-        if not added:
+                w, changed = np.insert(w, i + 1, middle, axis=0), True
+        if not changed:
             return w
     return w
 
@@ -712,13 +714,58 @@ def _onto_path(setup: Setup, theta: Array, planned: Array) -> Array | None:
     """Joint angles near ``theta`` (rad) whose light is on the planned path (the polyline through
     ``planned`` (K, 3), m, carried onto the sphere), aimed at O, within the joint bounds
     (:func:`follow_planned_path`); None when the IK does not converge there."""
-    robot, sphere = setup.robot, setup.sphere
-    target = _nearest_on_polyline(robot.light_positions(theta)[0], planned)
-    target = sphere.center + sphere.radius * (target - sphere.center) / np.linalg.norm(target - sphere.center)
+    sphere = setup.sphere
+    target = _nearest_on_polyline(setup.robot.light_positions(theta)[0], planned)
+    return _light_at(setup, sphere.center + sphere.radius * _unit(target - sphere.center), theta)
+
+
+def _light_at(setup: Setup, target: Array, theta: Array) -> Array | None:
+    """The generalized IK (no restarts, the joint-limit task) from ``theta`` (rad) to the light at
+    ``target`` (m, on the sphere) aimed at O: its joint angles when it converges within the joint
+    bounds, else None."""
     settings = {**ik_settings(setup.solver), "secondary": ("joint_limits",)}
-    ik = generalized_ik(robot, sphere, target, theta, restarts=False, **settings)
+    ik = generalized_ik(setup.robot, setup.sphere, target, theta, restarts=False, **settings)
     inside = np.all((ik.theta >= setup.limits.lower) & (ik.theta <= setup.limits.upper))
     return ik.theta if ik.success and inside else None
+
+
+def _unit(v: Array) -> Array:
+    return v / np.linalg.norm(v)
+
+
+#: Largest sag (m) of the chord between two knots' lights on the sphere below the great-circle arc
+#: between them (ρ(1 − cos(Δ/2)) for lights Δ apart) before a knot is added on the arc: a quarter
+#: of the verification's tolerance. The planned path is the polyline of the knots' lights; the
+#: light, on the sphere, follows the arc.
+ARC_SAG_M = 0.25 * Tolerances().path_m
+
+
+def knots_on_arcs(setup: Setup, knots: Array) -> Array:
+    """The knots (K, n) (rad) of one segment on the sphere, with knots added on the great-circle
+    arc between two consecutive knots whose lights are so far apart that the chord between them
+    sags more than :data:`ARC_SAG_M` below the arc (the free path's NLP bounds the joints' steps,
+    not the light's: lights 50° apart sag 37 mm at ρ = 0.4 m, and the light on the sphere is that
+    far from the planned path). A knot goes at the arc's midpoint, by the generalized IK from the
+    joint-space midpoint (:func:`_light_at`), and the halves are split again, at most
+    :data:`MAX_PATH_REFINEMENTS` deep; where the IK fails, the interval is left as it is."""
+    out = [knots[0]]
+    for q0, q1 in zip(knots[:-1], knots[1:], strict=True):
+        out += _arc_knots(setup, q0, q1, MAX_PATH_REFINEMENTS)
+        out.append(q1)
+    return np.array(out)
+
+
+def _arc_knots(setup: Setup, q0: Array, q1: Array, depth: int) -> list[Array]:
+    """Knots strictly between ``q0`` and ``q1`` on their lights' arc (:func:`knots_on_arcs`)."""
+    sphere = setup.sphere
+    u0, u1 = (_unit(a - sphere.center) for a in setup.robot.light_positions(np.array([q0, q1])))
+    half = 0.5 * float(np.arctan2(np.linalg.norm(np.cross(u0, u1)), u0 @ u1))
+    if depth == 0 or sphere.radius * (1.0 - np.cos(half)) <= ARC_SAG_M or np.linalg.norm(u0 + u1) < 1e-9:
+        return []
+    middle = _light_at(setup, sphere.center + sphere.radius * _unit(u0 + u1), 0.5 * (q0 + q1))
+    if middle is None:
+        return []
+    return [*_arc_knots(setup, q0, middle, depth - 1), middle, *_arc_knots(setup, middle, q1, depth - 1)]
 
 
 def _nearest_on_polyline(point: Array, polyline: Array) -> Array:
