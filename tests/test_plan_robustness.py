@@ -254,3 +254,19 @@ def test_knots_far_apart_on_the_sphere_get_knots_on_their_arc(small_setup: Setup
     trajectory = time_knots(small_setup, planned_path, planned)
     report = verify_knots(small_setup, trajectory, positions, planned, planned_path.transfers)
     assert report.checks["path"].max_value <= 0.5 * report.checks["path"].limit
+
+
+def test_the_planners_path_allowance_is_within_the_verifications_tolerance() -> None:
+    """The planner keeps the spline within half the verification's tolerance of the planned path and
+    measures it with its own polyline distance, which agrees with the verifier's (k-d tree pruned)."""
+    from optlight.planning import trajectory
+    from optlight.verify import Tolerances, distance_to_polyline
+
+    assert trajectory.PATH_DEVIATION_M <= 0.5 * Tolerances().path_m
+    assert trajectory.ARC_SAG_M <= trajectory.PATH_DEVIATION_M
+    rng = np.random.default_rng(1)
+    polyline = np.cumsum(rng.normal(scale=0.02, size=(40, 3)), axis=0)
+    points = polyline[rng.integers(0, 40, 300)] + rng.normal(scale=0.01, size=(300, 3))
+    np.testing.assert_allclose(
+        trajectory._polyline_distance(points, polyline), distance_to_polyline(points, polyline), atol=1e-12
+    )

@@ -58,7 +58,6 @@ from optlight.robot import light_residual
 from optlight.robot.ik import generalized_ik, ik_settings
 from optlight.setup import Setup
 from optlight.spec import SolverSpec
-from optlight.verify import Tolerances, distance_to_polyline
 
 Array = NDArray[np.float64]
 
@@ -650,8 +649,9 @@ def _thinned(knots: Array, step: float) -> Array:
 
 #: Largest distance (m) the timed path's light may stray from the planned path (the polyline of the
 #: knots' lights) between two knots of a segment on the sphere before a knot is added there: half the
-#: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`).
-PATH_DEVIATION_M = 0.5 * Tolerances().path_m
+#: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`, 5 mm; the planner does not
+#: import the verifier).
+PATH_DEVIATION_M = 2.5e-3
 #: Points per knot interval at which the spline's light is measured against the planned path.
 DEVIATION_SAMPLES = 8
 #: Rounds of knot insertion (each halves the intervals that still stray).
@@ -688,7 +688,7 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
             return w
         w = chord[1].copy()
         changed = False
-        for i in np.flatnonzero(distance_to_polyline(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
+        for i in np.flatnonzero(_polyline_distance(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
             on_path = _onto_path(setup, w[i], planned)
             if on_path is not None:
                 w[i], changed = on_path, True
@@ -700,7 +700,7 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
         tau = (np.arange(DEVIATION_SAMPLES) + 0.5) / DEVIATION_SAMPLES
         between = s[:-1, None] + tau[None, :] * np.diff(s)[:, None]
         lights = setup.robot.light_positions(spline(between.ravel()))
-        stray = distance_to_polyline(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
+        stray = _polyline_distance(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
         for i in np.flatnonzero(stray)[::-1]:  # from the end: the indices before stay valid
             middle = _onto_path(setup, spline(0.5 * (s[i] + s[i + 1])), planned)
             if middle is not None:
@@ -734,10 +734,10 @@ def _unit(v: Array) -> Array:
 
 
 #: Largest sag (m) of the chord between two knots' lights on the sphere below the great-circle arc
-#: between them (ρ(1 − cos(Δ/2)) for lights Δ apart) before a knot is added on the arc: a quarter
-#: of the verification's tolerance. The planned path is the polyline of the knots' lights; the
+#: between them (ρ(1 − cos(Δ/2)) for lights Δ apart) before a knot is added on the arc: half the
+#: spline's allowance. The planned path is the polyline of the knots' lights; the
 #: light, on the sphere, follows the arc.
-ARC_SAG_M = 0.25 * Tolerances().path_m
+ARC_SAG_M = 0.5 * PATH_DEVIATION_M
 
 
 def knots_on_arcs(setup: Setup, knots: Array) -> Array:
@@ -766,6 +766,15 @@ def _arc_knots(setup: Setup, q0: Array, q1: Array, depth: int) -> list[Array]:
     if middle is None:
         return []
     return [*_arc_knots(setup, q0, middle, depth - 1), middle, *_arc_knots(setup, middle, q1, depth - 1)]
+
+
+def _polyline_distance(points: Array, polyline: Array) -> Array:
+    """Distance (m) from each point (P, 3) to the polyline through the vertices (K ≥ 2, 3):
+    min over segments of |p − (v_i + c d_i)|, c = clip((p − v_i)·d_i / |d_i|², 0, 1)."""
+    a, d = polyline[:-1], np.diff(polyline, axis=0)
+    rel = points[:, None, :] - a[None, :, :]
+    c = np.clip(np.einsum("pkj,kj->pk", rel, d) / np.maximum(np.einsum("kj,kj->k", d, d), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(rel - c[:, :, None] * d[None, :, :], axis=2).min(axis=1)
 
 
 def _nearest_on_polyline(point: Array, polyline: Array) -> Array:
