@@ -78,6 +78,14 @@ class SolverError(OptlightError):
     """A numerical solver failed in a way the caller cannot recover from."""
 
 
+class CaptureSolverError(SolverError):
+    """The trajectory NLP found no way between the captures ``first`` and ``last`` (visiting order)."""
+
+    def __init__(self, message: str, first: int, last: int) -> None:
+        super().__init__(message)
+        self.first, self.last = int(first), int(last)
+
+
 def iteration_limit_error(what: str, max_iter: int) -> SolverError:
     """The error for an IPOPT solve of ``what`` that stopped at ``[solver] max_iter``: a solver
     limit the user can raise, not a property of the problem."""

@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
-from optlight.errors import SolverError
+from optlight.errors import CaptureSolverError, SolverError
 from optlight.motion import Trajectory
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
@@ -69,7 +69,14 @@ from optlight.planning.set_landmarks import (
 )
 from optlight.planning.timing import time_parameterize
 from optlight.planning.torque_scaling import within_torque_limits
-from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
+from optlight.planning.trajectory import (
+    TrajectoryNLPResult,
+    follow_planned_path,
+    knot_cost,
+    knots_on_arcs,
+    optimize_knots,
+    plan_transfer,
+)
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.setup import Setup
 from optlight.spec import Problem, check_trajectory_samples
@@ -141,20 +148,38 @@ def solve(
     with stage("path"):
         order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
-        positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
-        path = capture_path(setup, positions, landmark_thetas)
+        path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
     heard("path", Route(order, visited, landmark_thetas, path, warm, failures))
-    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
     if failures.any():
         notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
-        path, warm, nlp = optimize_path(
-            setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
-        )
+        while True:
+            try:
+                path, warm, nlp = optimize_path(
+                    setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
+                )
+                break
+            except CaptureSolverError as error:
+                if not setup.landmark_spec.allow_partial or len(visited) < 2:
+                    raise
+                k = hardest_capture(landmark_thetas, error.first, error.last)
+                lm = visited[k]
+                notes.append(
+                    f"dropped landmark {lm.index} (zenith {np.degrees(lm.zenith):.1f}°, azimuth "
+                    f"{np.degrees(lm.azimuth):.1f}°), capture {k} of the visiting order: the trajectory NLP "
+                    f"found no way {error}; of its captures this one needs the largest reconfiguration"
+                )
+                visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
+                path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
+                warm, failures = knot_ik(setup, path, landmark_thetas)
     heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
+    positions = np.array([lm.position for lm in visited])
+    lightset = (
+        set_summary(setup, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
+    )
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -164,7 +189,8 @@ def solve(
         )
 
     with stage("timing"):
-        trajectory = time_knots(setup, path, nlp.theta)
+        timed_path, timed_knots = knots_on_path(setup, path, nlp.theta)
+        trajectory = time_knots(setup, timed_path, timed_knots)
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory
         check_trajectory_samples(setup.problem, setup.robot.n, trajectory.duration, dwell)
@@ -172,7 +198,7 @@ def solve(
 
     with stage("verify"):
         waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, setup.trajectory_spec.rate_hz))
-        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers, waypoints)
+        report = verify_knots(setup, trajectory, positions, timed_knots, timed_path.transfers, waypoints)
     heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
@@ -333,7 +359,7 @@ def optimize_path(
     :func:`optimize_window`), and where it finds no way from there, it is solved again together with
     the window before it. Returns the path (with the transfers the windows needed), its warm start
     and the NLP's result over all knots; raises :class:`SolverError` naming the captures of the
-    window that failed. ``progress(done, total)`` after each window.
+    window that failed (:class:`CaptureSolverError`). ``progress(done, total)`` after each window.
 
     Why windows: one NLP over all knots needs as many iterations as its hardest stretch needs, for
     every knot; on the scaling benchmark's 576 captures among 3 obstacles it did not converge in
@@ -355,9 +381,9 @@ def optimize_path(
             except SolverError as e:
                 error = e
         else:
-            if len(windows) == 1:
-                raise error
-            raise SolverError(f"between captures {first} and {last} (visiting order): {error}") from error
+            raise CaptureSolverError(
+                f"between captures {first} and {last} (visiting order): {error}", first, last
+            ) from error
         warm[knots], theta[knots], transfers[start:last] = warm_window, result.theta, window.transfers
         results.append(result)
         if progress is not None:
@@ -408,6 +434,16 @@ def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -
     )
 
 
+def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
+    """Of the captures ``first`` … ``last`` (visiting order) with postures ``landmark_thetas`` (M, n),
+    rad, the one whose posture is farthest from its neighbours' (Σ over the segments before and after
+    it of the largest joint's change): the capture the trajectory NLP drops first when it finds no way
+    through them (``[landmarks] allow_partial``)."""
+    steps = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
+    around = np.concatenate([[0.0], steps]) + np.concatenate([steps, [0.0]])
+    return first + int(np.argmax(around[first : last + 1]))
+
+
 def unfollowed_segments(
     setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64]
 ) -> NDArray[np.bool_]:
@@ -424,13 +460,44 @@ def unfollowed_segments(
     return unfollowed
 
 
+def knots_on_path(setup: Setup, path: LightPath, theta: Array) -> tuple[LightPath, Array]:
+    """The path and its knots ``theta`` (K, n) (rad) with knots added on the great-circle arcs of the
+    segments on the sphere where two knots' lights are far apart
+    (:func:`~optlight.planning.trajectory.knots_on_arcs`): the planned path the timing follows and
+    the verification measures against. The added knots' directions, positions and rotations are
+    their lights' (as are those of the other knots of their segment); the transfers' are kept."""
+    segments = path.segments()
+    refined = [theta[s] if off else knots_on_arcs(setup, theta[s]) for s, off in zip(segments, path.transfers, strict=True)]
+    if sum(len(k) for k in refined) == sum(s.stop - s.start for s in segments):
+        return path, theta
+    knots, directions, positions, rotations = [theta[:1]], [path.directions[:1]], [path.positions[:1]], [path.rotations[:1]]
+    for s, off, part in zip(segments, path.transfers, refined, strict=True):
+        if off:
+            poses = (path.directions[s], path.positions[s], path.rotations[s])
+        else:
+            a, r = zip(*(setup.robot.light_pose(q) for q in part), strict=True)
+            a_arr = np.array(a)
+            d = a_arr - setup.sphere.center
+            poses = (d / np.linalg.norm(d, axis=1, keepdims=True), a_arr, np.array(r))
+        knots.append(part[1:])
+        for out, values in zip((directions, positions, rotations), poses, strict=True):
+            out.append(values[1:])
+    landmark_knots = np.concatenate([[0], np.cumsum([len(k) - 1 for k in refined])]).astype(np.int64)
+    refined_path = LightPath(
+        np.vstack(directions), np.vstack(positions), np.concatenate(rotations), path.order, landmark_knots, path.transfers
+    )
+    return refined_path, np.vstack(knots)
+
+
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     """The timed trajectory through the knots ``theta`` (K, n) (rad) of ``path``: the transfer from the
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits; the whole
-    motion slowed where its joint torques would exceed the robot's limits
+    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits and, on the
+    sphere, within :data:`~optlight.planning.trajectory.PATH_DEVIATION_M` of the planned path
+    (:func:`~optlight.planning.trajectory.follow_planned_path`); the whole motion slowed where its
+    joint torques would exceed the robot's limits
     (:func:`~optlight.planning.torque_scaling.within_torque_limits`)."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
@@ -439,7 +506,10 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
         if spec.return_home
         else None
     )
-    segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
+    segments = [
+        theta[s] if off else follow_planned_path(setup, theta[s])
+        for s, off in zip(path.segments(), path.transfers, strict=True)
+    ] or [theta[:1]]  # one landmark: its dwell
 
     def timed(scale: float) -> Trajectory:
         """The motion timed with the limits scaled for the torques (planning/torque_scaling.py)."""

@@ -342,7 +342,7 @@ def _start_configuration(problem: Problem, robot: Robot, environment: Environmen
                 list(value),
             )
     if environment is not None and environment.collisions:
-        clearance, _ = environment.sphere_clearance(robot, theta)
+        clearance, _ = environment.sphere_clearance(robot, theta, beam=False)
         worst = environment.clearance_labels(robot)[int(np.argmin(clearance))] if clearance.size else ""
         if clearance.size and clearance.min() < 0.0:
             raise ProblemError(

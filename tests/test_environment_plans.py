@@ -477,7 +477,7 @@ def test_a_placement_from_the_near_rows_is_the_one_from_every_row() -> None:
     assert row_sets and all(len(key) < rows / 2 for key in row_sets)
 
     nlp, n_env = placement._solver(None)
-    assert n_env == rows + len(env.view_labels(robot))
+    assert n_env == rows + len(env.view_labels(robot, beam=False))  # the beam: checked on the result
     full_lbg, full_ubg = np.r_[lbg, np.full(n_env, CAPTURE_SLACK)], np.r_[ubg, np.full(n_env, np.inf)]
     every = placement._margined(nlp, ik.theta, p, full_lbg, full_ubg, relax=True)
     assert every.success

@@ -590,21 +590,30 @@ def design_light_set(
     allowed: AllowedHook | None = None,
     solver: SolverSpec | None = None,
     designer: LightSetDesigner | None = None,
+    start_pool: ArrayLike | None = None,
 ) -> LightSetResult:
     """The best of several solves of the set NLP (:class:`LightSetDesigner`, built once).
 
     Starts: ``start`` (N, 3) directions on the cap when given (then it is the only start), else
-    ``starts`` sets drawn uniformly on the cap's area with ``np.random.default_rng(seed)``. A
-    ``designer`` built before for the same objective, N and cap is reused. Returns the start with the
-    lowest final cost; ``start_costs`` lists every start's."""
+    ``starts`` sets drawn with ``np.random.default_rng(seed)``: N distinct directions of
+    ``start_pool`` (P ≥ N, 3; on the cap) each when given — where ``allowed`` holds, so that IPOPT
+    starts feasible (from uniform starts on the cap it reported a thin band of reachable lights
+    infeasible) — else uniformly on the cap's area. A ``designer`` built before for the same
+    objective, N and cap is reused. Returns the start with the lowest final cost; ``start_costs``
+    lists every start's."""
     if designer is None:
         designer = LightSetDesigner(objective, n, cap, solver, allowed)
     elif designer.n != n or designer.cap != cap or designer.objective is not objective:
         raise OptlightError("the designer was built for another objective, light count or cap")
+    rng = np.random.default_rng(seed)
     if start is not None:
         candidates = [check_in_cap(start, cap)]
+    elif start_pool is not None:
+        pool = check_in_cap(start_pool, cap)
+        if len(pool) < n:
+            raise OptlightError(f"{len(pool)} start directions for a set of {n} lights")
+        candidates = [pool[rng.choice(len(pool), n, replace=False)] for _ in range(max(1, starts))]
     else:
-        rng = np.random.default_rng(seed)
         candidates = [cap.random(n, rng) for _ in range(max(1, starts))]
     results = [designer.solve(s) for s in candidates]
     best = min(results, key=lambda r: (not r.success, r.cost))

@@ -321,17 +321,19 @@ def environment_rows(
     theta: Symbolic,
     *,
     view: bool = True,
+    beam: bool = True,
     clearance_rows: Sequence[int] | None = None,
 ) -> Symbolic:
     """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions;
     only ``clearance_rows`` of them when given, e.g. those that can bind), then (``view`` and
-    the view cone on) its view rows; the CasADi functions are the environment's, built once per robot
-    and row selection."""
+    the view cone on) its view rows, the beam's included with ``beam`` (the light on the sphere,
+    aimed at the object); the CasADi functions are the environment's, built once per robot and row
+    selection."""
     rows = []
     if environment.collisions:
         rows.append(environment.clearance_function(robot, clearance_rows)(theta))
     if view and environment.view_cone is not None:
-        rows.append(environment.view_cone_function(robot)(theta))
+        rows.append(environment.view_cone_function(robot, beam=beam)(theta))
     return ca.vertcat(*rows) if rows else ca.MX(0, 1)
 
 

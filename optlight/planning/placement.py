@@ -22,7 +22,8 @@ environment (:class:`~optlight.environment.Environment`) join: the clearance c(�
 the obstacles minus ``margin``, sphere pairs of the self pairs minus ``self_margin``) and, unless the
 view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres to the camera's view
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
-modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
+modes (the light's beam onto the object, the view rows' second part, is checked on the placement's
+result and held by the clear posture, :class:`ClearPosture`); each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
 (rows ≥ 0) starts inside its feasible set (where no light of the azimuth keeps s: on the rows'
 bounds, :meth:`LightPlacement._margined`). A landmark whose light the robot only reaches by
 colliding or blocking the camera then moves along its azimuth to the best light it reaches clear of
@@ -250,7 +251,10 @@ class LightPlacement:
                 clearance = env.clearance_function(self.robot)
                 rows.append(clearance(theta) if active is None else selected_rows(clearance, theta, [0], 0, active)[0])
             if env is not None and env.view_cone is not None:
-                rows.append(env.view_cone_function(self.robot)(theta))
+                # the beam's rows are left to the check of the result (worst_sphere_row) and the
+                # clear posture: started from the IK's posture of a light out of reach, the arm
+                # stretched through the beam, IPOPT reported the placement infeasible (point_light)
+                rows.append(env.view_cone_function(self.robot, beam=False)(theta))
             g = ca.vertcat(*rows)
             nlp = ca.nlpsol("light_placement", "ipopt", {"x": theta, "p": self._p, "f": self._cost, "g": g}, self._options)
             self._solvers[key] = (nlp, g.size1() - (ZENITH_ROW + 1))
