@@ -138,6 +138,12 @@ _UR10_SPEED = (120 * _DEG,) * 2 + (180 * _DEG,) * 4
 #: accelerations (only on torques)"); UR's own MoveIt configuration uses 5 rad/s² for every joint
 #: (UniversalRobots/Universal_Robots_ROS2_Driver, ur_moveit_config/config/joint_limits.yaml).
 _UR_ACCELERATION = 5.0
+#: The link pairs of a UR arm that cannot collide (MoveIt's "Adjacent" and "Never"): example-robot-data
+#: ships them for the UR5 only, but they are the same for every UR of its URDFs (the same link names
+#: and joint layout, scaled), as Universal Robots' own MoveIt configuration has one SRDF macro for
+#: every UR type (ur_moveit_config, srdf/ur_macro.srdf.xacro). Without them the UR10's base_link and
+#: upper_arm_link, 18–20 mm apart in every configuration (the shoulder offset), count as a self pair.
+_UR_SRDF = "ur_description/srdf/ur5.srdf"
 
 
 ROBOTS: dict[str, RobotInfo] = {
@@ -155,7 +161,7 @@ ROBOTS: dict[str, RobotInfo] = {
     ),
     "ur3": RobotInfo(
         "ur_description/urdf/ur3_robot.urdf",
-        None,
+        _UR_SRDF,
         "tool0",
         theta_ref=_UR_REFERENCE,
         velocity_limit=_UR3_SPEED,  # UR3 CB3 datasheet: base, shoulder, elbow 180°/s, wrists 360°/s
@@ -171,7 +177,7 @@ ROBOTS: dict[str, RobotInfo] = {
     ),
     "ur10": RobotInfo(
         "ur_description/urdf/ur10_robot.urdf",
-        None,
+        _UR_SRDF,
         "tool0",
         theta_ref=_UR_REFERENCE,
         velocity_limit=_UR10_SPEED,  # UR10 CB3 datasheet: base, shoulder 120°/s, the others 180°/s
