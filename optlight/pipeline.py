@@ -132,7 +132,7 @@ def solve(
     if worker is not None:  # drawn there while the motion is planned, with the captures placed
         jobs = landmark_jobs(landmarks, setup.scene, placement.landmarks)
         figures = {n: worker.draw(job) for n, job in jobs.items()}
-    notes = [*landmarks.notes, *merged, *placement.warnings]
+    notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
         order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)

@@ -117,6 +117,8 @@ class Setup:
             if problem.environment.enabled or problem.view.mode != "off"
             else None
         )
+        if environment is not None and environment.collisions:
+            _check_fixed_clearance(problem, robot, environment)
         start, start_note = _start_configuration(problem, robot, environment)
         return cls(
             problem=problem,
@@ -403,6 +405,27 @@ def _start_configuration(
                 value,
             )
     return theta, None
+
+
+def _check_fixed_clearance(problem: Problem, robot: Robot, environment: Environment) -> None:
+    """A :class:`ProblemError` naming ``environment.table_height_m``, with the highest table top that
+    works, when a body whose height over the table no motion changes (on a first joint turning about
+    the vertical, :attr:`~optlight.environment.CollisionModel.fixed_obstacle_distance`) is closer to
+    it than ``[environment] margin_m``: no plan could clear it."""
+    model = environment.collision_model(robot)
+    for (body, obstacle), distance in sorted(model.fixed_obstacle_distance.items()):
+        table = problem.environment.table_height_m
+        if distance >= environment.margin or obstacle != "table" or table is None:
+            continue
+        highest = math.floor((table - (environment.margin - distance)) * 1e3) / 1e3  # mm, rounded down
+        raise ProblemError(
+            str(problem.source) if problem.source else "<inline>",
+            "environment.table_height_m",
+            f"a table top at most {highest:.3f} m: {body} of {robot.name} "
+            f"turns about the vertical {distance * 1e3:.1f} mm above the table, closer than [environment] "
+            f"margin_m = {environment.margin:g} m in every configuration",
+            table,
+        )
 
 
 def _angles(theta: Array) -> str:
