@@ -411,7 +411,7 @@ def unfollowed_segments(
     unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
     if environment is not None and environment.collisions:
         clearance = np.array([environment.sphere_clearance(setup.robot, q)[0].min() for q in warm])
-        unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments])
+        unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments], dtype=bool)  # none: (0,) bool
     return unfollowed
 
 

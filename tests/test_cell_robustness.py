@@ -189,3 +189,21 @@ def test_random_cells_plan_or_say_why(seed: int, tmp_path) -> None:
         assert re.search(r"\[\w+\]|\b\w+\.\w+\b", str(e)), str(e)
         return
     assert plan.verification.passed, (cell.name, plan.verification.counts)
+
+
+def test_a_window_with_one_capture_has_no_unfollowed_segment() -> None:
+    """A stretch of the path with a single capture (a light set cut to one light) has no segment:
+    with obstacles the check of the IK's clearance along segments gives an empty boolean array
+    (it raised TypeError, a traceback, in a random cell)."""
+    from conftest import reduced_problem
+
+    from optlight.pipeline import unfollowed_segments
+    from optlight.planning.path import build_path
+
+    setup = Setup.from_problem(reduced_problem("collision", camera_px=32))
+    assert setup.environment is not None and setup.environment.collisions
+    position = setup.sphere.center + setup.sphere.radius * setup.sphere.direction(0.5, 1.0)
+    path = build_path(setup.sphere, position[None], [0], np.radians(2.0))
+    warm = np.repeat(setup.start[None], path.n_knots, axis=0)
+    out = unfollowed_segments(setup, path, warm, np.zeros(0, dtype=np.int64))
+    assert out.shape == (0,) and out.dtype == bool
