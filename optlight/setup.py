@@ -282,7 +282,7 @@ START_TURNS = tuple(np.deg2rad(a) for a in (30, -30, 60, -60, 90, -90, 120, -120
 START_SAMPLES = 150
 START_SPREADS = (0.3, 0.6, 1.2)
 #: A chosen start keeps every sphere row (clearance and view) at least this far inside (m): none more
-#: than the reference configuration itself (rows whose margin is lowered there keep 1 mm).
+#: than the reference configuration itself (rows whose margin is lowered there keep 5 mm).
 START_SLACK_M = 0.0
 
 

@@ -47,9 +47,13 @@ from optlight.robot.loading import ROBOTS, Robot, example_robot_data_dir
 Array = NDArray[np.float64]
 PairKind = Literal["obstacle", "self", "view"]
 
-#: A self row whose spheres are closer than the margin at the (exactly clear) reference
-#: configuration keeps this much less than they are there (m; :meth:`CollisionModel._self_row_margins`).
-REFERENCE_SLACK_M = 0.001
+#: A row whose spheres are closer than the margin at the (exactly clear) reference configuration
+#: keeps this much less than they are there (m; :meth:`CollisionModel._self_row_margins`,
+#: :meth:`CollisionModel._obstacle_row_margins`): more than the 2 mm the placements hold their
+#: postures inside every row (``optlight.environment.CAPTURE_SLACK``), so that a posture near the
+#: reference is still a capture posture (with 1 mm, a UR5 over a table at its base's height had no
+#: light clear: its upper arm's sphere keeps about the same height at every angle).
+REFERENCE_SLACK_M = 0.005
 #: Sphere–obstacle rows are kept when the sphere can come this close beyond the margin (m).
 PRUNE_SLACK_M = 0.05
 #: Name of the light housing body.
