@@ -1,6 +1,6 @@
 """Random sensible cells through the whole pipeline: how many plan and verify, how many are refused, why.
 
-Each cell (:func:`optlight.random_cells.random_cell`, seeds 0 … n − 1: a robot, an object, a camera
+Each cell (:func:`optlight.random_cell`, seeds 0 … n − 1: a robot, an object, a camera
 placement, a cap, a light-sphere radius, a task, with or without a table, a wall and the camera's
 stand) is solved by the public :func:`optlight.solve` in a process of its own with a time limit
 (``timeout_s``; a cell that takes longer is counted as ``timeout``), so that a hang or a crash of
@@ -60,9 +60,8 @@ def solve_one(seed: int, folder: str) -> dict[str, Any]:
     import warnings
 
     import optlight
-    from optlight.random_cells import random_cell
 
-    cell = random_cell(seed, folder)
+    cell = optlight.random_cell(seed, folder)
     out: dict[str, Any] = {"seed": seed, "name": cell.name, "labels": cell.labels}
     start = time.perf_counter()
     try:

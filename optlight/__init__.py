@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import Trajectory, time_parameterize
+    from optlight.random_cells import RandomCell, random_cell
     from optlight.robot import IKResult, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
@@ -91,6 +92,8 @@ _LAZY = {
     "run_batch": "optlight.batch",
     "CellResult": "optlight.cell",
     "design_cell": "optlight.cell",
+    "RandomCell": "optlight.random_cells",
+    "random_cell": "optlight.random_cells",
 }
 
 

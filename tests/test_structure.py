@@ -27,7 +27,7 @@ LAYERS: list[set[str]] = [
     {"spec"},
     {"geometry"},
     {"scene", "robot"},
-    {"objectives", "environment", "photometric_stereo"},
+    {"objectives", "environment", "photometric_stereo", "random_cells"},
     {"setup"},
     {"capture"},
     {"planning"},
