@@ -51,8 +51,14 @@ def reason_key(error: BaseException) -> str:
     key = getattr(error, "key", None)
     if key:
         return f"{name}:{_INDEX.sub('[]', str(key))}"
-    words = re.sub(r"'[^']*'|\"[^\"]*\"|[-+]?\d[\d.]*", "", str(error).split(":")[0]).split()
-    return f"{name}:{' '.join(words[:6])}"
+    return f"{name}:{first_words(str(error))}"
+
+
+def first_words(message: str) -> str:
+    """The first six words of a message's first clause, quoted names and free-standing numbers
+    left out (a robot's name such as ``ur5`` kept)."""
+    words = re.sub(r"'[^']*'|\"[^\"]*\"|(?<![A-Za-z])[-+]?\d[\d.]*", "", message.split(":")[0]).split()
+    return " ".join(words[:6])
 
 
 def solve_one(seed: int, folder: str) -> dict[str, Any]:
