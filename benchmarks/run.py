@@ -71,7 +71,7 @@ README = BENCH_DIR / "README.md"
 #: Module of the whole-pipeline benchmark, ``run(problem, repeats)``; every other ``bench_*.py`` is a component.
 PIPELINE_MODULE = "bench_solve"
 #: ``--quick`` sizes, passed to a benchmark's ``run`` only for the parameters it has.
-QUICK_SIZES: dict[str, Any] = {"n": 300, "repeats": 1}
+QUICK_SIZES: dict[str, Any] = {"n": 300, "repeats": 1, "cells": 12}
 #: Solves per problem in a full run (a component runs with its own defaults).
 PIPELINE_REPEATS = 3
 #: Distributions whose versions are recorded (import names differ: ``pin`` is ``pinocchio``).
@@ -556,6 +556,26 @@ def batch_rows(name: str, result: Result) -> list[Row]:
     return rows
 
 
+def cell_rows(name: str, result: Result) -> list[Row]:
+    """``bench_cells``: the share of random cells verified (success %), each outcome's count, the
+    refusals by reason, the solve time of the verified cells, and the verified share per robot,
+    object, task and environment."""
+    cells = result["cells"]
+    rows = [Row(name, f"{cells} random cells verified [%]", result["verified_pct"]["median"])]
+    rows += [Row(name, f"{outcome} [cells]", count) for outcome, count in result["counts"].items()]
+    rows += [Row(name, f"refused: {reason} [cells]", count) for reason, count in result["refused_by_reason"].items()]
+    if result["solve_s"]:
+        rows.append(Row(name, "solve, verified cells [s]", result["solve_s"]["median"], result["solve_s"]["p98"]))
+    for category, table in result["per_category"].items():
+        for label, counts in table.items():
+            total = sum(counts.values())
+            rows.append(
+                Row(name, f"{category} {label}: verified of {total}", counts["verified"],
+                    success_pct=100.0 * counts["verified"] / max(1, total))
+            )
+    return rows
+
+
 def lightset_plan_rows(name: str, result: Result) -> list[Row]:
     """``bench_lightset_plans``: every distribution (:func:`distribution_rows`); where the set was
     also designed on the cap alone, its rows carry that design's median as the baseline (same run)."""
@@ -578,6 +598,7 @@ def lightset_plan_rows(name: str, result: Result) -> list[Row]:
 #: Components whose results need their own reading (a baseline to pair); the rest are read generically.
 COMPONENT_ROWS: dict[str, RowsFn] = {
     "batch": batch_rows,
+    "cells": cell_rows,
     "environment": environment_rows,
     "ik": ik_rows,
     "landmarks": landmark_rows,

@@ -46,6 +46,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import time_parameterize
     from optlight.planning.waypoints import Waypoints, controller_waypoints
+    from optlight.random_cells import RandomCell, random_cell
     from optlight.report import FigureDrafts
     from optlight.robot import Dynamics, IKResult, Lamp, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
@@ -103,6 +104,8 @@ _LAZY = {
     "run_batch": "optlight.batch",
     "CellResult": "optlight.cell",
     "design_cell": "optlight.cell",
+    "RandomCell": "optlight.random_cells",
+    "random_cell": "optlight.random_cells",
 }
 
 

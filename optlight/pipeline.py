@@ -143,7 +143,7 @@ def solve(
             else:
                 placement = place_captures(setup, captures, design, reacher)
     heard("placement", placement)
-    notes = [*landmarks.notes, *merged, *placement.warnings]
+    notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
         order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
@@ -456,7 +456,7 @@ def unfollowed_segments(
     unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
     if environment is not None and environment.collisions:
         clearance = np.array([environment.sphere_clearance(setup.robot, q)[0].min() for q in warm])
-        unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments])
+        unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments], dtype=bool)  # none: (0,) bool
     return unfollowed
 
 

@@ -14,7 +14,8 @@
   kept by the environment;
 - the lights the landmark search may use: the allowed cap less the lights whose housing would enter
   the camera's view (``view_zenith``, see :func:`view_zenith`);
-- the start configuration (``[robot] start``);
+- the start configuration (``[robot] start``; unset, the robot's reference configuration, or the
+  clear configuration nearest it when the reference is not clear: ``start_note`` says which);
 - the generalized IK's settings from ``[solver]``.
 
 The planners take a ``Setup`` and read their configuration from its typed sections (``landmark_spec``,
@@ -40,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK, LIGHT, Environment
+from optlight.environment.check import check_configurations
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
@@ -100,6 +102,7 @@ class Setup:
     start: Array
     view_zenith: float
     dynamics: Dynamics
+    start_note: str | None = None
 
     @classmethod
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
@@ -128,7 +131,9 @@ class Setup:
             if problem.environment.enabled or problem.view.mode != "off"
             else None
         )
-        start = _start_configuration(problem, robot, environment)
+        if environment is not None and environment.collisions:
+            _check_fixed_clearance(problem, robot, environment)
+        start, start_note = _start_configuration(problem, robot, environment)
         return cls(
             problem=problem,
             scene=scene,
@@ -142,6 +147,7 @@ class Setup:
             start=start,
             view_zenith=view_zenith(problem, scene.sphere, environment, robot),
             dynamics=Dynamics(robot, lamp_of(problem)),
+            start_note=start_note,
         )
 
     @property
@@ -313,16 +319,104 @@ def view_zenith(
     return hi
 
 
-def _start_configuration(problem: Problem, robot: Robot, environment: Environment | None) -> Array:
-    """θ_start (rad) from ``[robot] start``: joint angles, an SRDF configuration's name, or (unset)
-    the robot's reference configuration; a :class:`ProblemError` naming ``robot.start`` when it has
-    the wrong length, lies outside the joint limits, is not a configuration of the SRDF, or puts the
-    robot into an obstacle or itself (``[environment] enabled``)."""
+#: Turns of the first joint (rad) tried first for a clear start: the arm turned away as a whole.
+START_TURNS = tuple(np.deg2rad(a) for a in (30, -30, 60, -60, 90, -90, 120, -120, 150, -150, 180, -180))
+#: Random configurations around θ_ref tried next, per spread σ (rad) of :data:`START_SPREADS`.
+START_SAMPLES = 150
+START_SPREADS = (0.3, 0.6, 1.2)
+#: A chosen start keeps every sphere row (clearance and view) at least this far inside (m): none more
+#: than the reference configuration itself (rows whose margin is lowered there keep 5 mm).
+START_SLACK_M = 0.0
+
+
+def _sphere_rows_clear(environment: Environment, robot: Robot, theta: Array, slack: float) -> tuple[bool, float, str]:
+    """Whether the NLPs' rows at θ (rad) — the clearance rows when obstacles and self-collision are
+    modelled, the view rows when the view is kept clear along the whole motion (``[view] mode =
+    "path"``; at the captures only, the start may stand in the view) — are all ≥ ``slack`` (m); the
+    worst row (m) and its label."""
+    # the beam matters at the captures only, never at the start
+    clearance, view = environment.sphere_clearance(robot, theta, beam=False)
+    labels = (*environment.clearance_labels(robot), *environment.view_labels(robot, beam=False))
+    n_clearance = len(clearance)
+    if environment.view_mode != "path":
+        labels, view = labels[:n_clearance], np.zeros(0)
+    if not environment.collisions:
+        labels, clearance = labels[n_clearance:], np.zeros(0)
+    rows = np.concatenate([clearance, view])
+    if not rows.size:
+        return True, math.inf, ""
+    k = int(np.argmin(rows))
+    return bool(rows[k] >= slack), float(rows[k]), labels[k]
+
+
+def _exactly_clear(environment: Environment, robot: Robot, theta: Array) -> bool:
+    """Coal's exact check of θ: obstacles, self-collision and (``[view] mode = "path"``) the camera's
+    view."""
+    mode = "path" if environment.view_mode == "path" else "off"
+    model = environment.collision_model(robot)
+    return check_configurations(model, theta[None, :], np.zeros(1), view=mode).passed
+
+
+def clear_start(robot: Robot, environment: Environment, seed: int = 0) -> Array | None:
+    """The configuration nearest θ_ref (Euclidean, rad) among the candidates — θ_ref with its first
+    joint turned by :data:`START_TURNS`, then :data:`START_SAMPLES` random configurations per spread
+    of :data:`START_SPREADS` around it, clipped to the limits — whose sphere rows are all ≥
+    :data:`START_SLACK_M` and which coal's exact check finds clear of the obstacles, of itself and
+    (``[view] mode = "path"``) out of the camera's view; None when no candidate is. Seeded: the same
+    cell, the same start."""
+    reference = np.asarray(robot.theta_ref, float)
+    rng = np.random.default_rng(seed)
+    candidates = []
+    for turn in START_TURNS:
+        theta = reference.copy()
+        theta[0] += turn
+        candidates.append(theta)
+    for spread in START_SPREADS:
+        candidates += list(reference + rng.normal(0.0, spread, size=(START_SAMPLES, robot.n)))
+    candidates = [np.clip(t, robot.lower, robot.upper) for t in candidates]
+    clear = [t for t in candidates if _sphere_rows_clear(environment, robot, t, START_SLACK_M)[0]]
+    for theta in sorted(clear, key=lambda t: float(np.linalg.norm(t - reference))):
+        if _exactly_clear(environment, robot, theta):
+            return theta
+    return None
+
+
+def _start_configuration(
+    problem: Problem, robot: Robot, environment: Environment | None
+) -> tuple[Array, str | None]:
+    """θ_start (rad) from ``[robot] start`` and a note when it is not what the file says: joint
+    angles, an SRDF configuration's name, or (unset) the robot's reference configuration — or, when
+    that is not clear of the environment (and of the camera's view with ``[view] mode = "path"``; the
+    NLPs' sphere rows), the clear
+    configuration nearest it (:func:`clear_start`), with a note saying so. A :class:`ProblemError`
+    naming ``robot.start`` when it has the wrong length, lies outside the joint limits, is not a
+    configuration of the SRDF, or (given) puts the robot into an obstacle or itself
+    (``[environment] enabled``): the message then proposes a clear start when one is found."""
     file = str(problem.source) if problem.source else "<inline>"
     value = problem.robot.start
     if value is None:
         theta = np.asarray(robot.theta_ref, float)
-    elif isinstance(value, str):
+        if environment is None:
+            return theta, None
+        ok, worst, label = _sphere_rows_clear(environment, robot, theta, 0.0)
+        if ok:
+            return theta, None
+        chosen = clear_start(robot, environment)
+        what = f"{label} {-worst * 1e3:.1f} mm too close" if "view_cone" not in label else f"{label}: in the camera's view"
+        if chosen is None:
+            raise ProblemError(
+                file,
+                "robot.start",
+                f"a start configuration clear of the environment and the camera's view: the reference "
+                f"configuration of {robot.name} is not ({what}) and none near it is; set [robot] start",
+            )
+        note = (
+            f"the reference configuration of {robot.name} is not clear ({what}): the plan starts and "
+            f"ends at the clear configuration nearest it, [robot] start = {_angles(chosen)} "
+            "(set [robot] start to choose another)"
+        )
+        return chosen, note
+    if isinstance(value, str):
         if value not in robot.named_configurations:
             names = ", ".join(sorted(robot.named_configurations)) or "none in its SRDF"
             raise ProblemError(
@@ -343,12 +437,41 @@ def _start_configuration(problem: Problem, robot: Robot, environment: Environmen
             )
     if environment is not None and environment.collisions:
         clearance, _ = environment.sphere_clearance(robot, theta, beam=False)
-        worst = environment.clearance_labels(robot)[int(np.argmin(clearance))] if clearance.size else ""
         if clearance.size and clearance.min() < 0.0:
+            label = environment.clearance_labels(robot)[int(np.argmin(clearance))]
+            chosen = clear_start(robot, environment)
+            hint = f"; e.g. [robot] start = {_angles(chosen)} is clear" if chosen is not None else ""
             raise ProblemError(
                 file,
                 "robot.start",
-                f"a configuration clear of the environment ({worst} is {-clearance.min() * 1e3:.1f} mm too close)",
-                value if value is not None else "the reference configuration",
+                f"a configuration clear of the environment ({label} is {-clearance.min() * 1e3:.1f} mm "
+                f"too close{hint})",
+                value,
             )
-    return theta
+    return theta, None
+
+
+def _check_fixed_clearance(problem: Problem, robot: Robot, environment: Environment) -> None:
+    """A :class:`ProblemError` naming ``environment.table_height_m``, with the highest table top that
+    works, when a body whose height over the table no motion changes (on a first joint turning about
+    the vertical, :attr:`~optlight.environment.CollisionModel.fixed_obstacle_distance`) is closer to
+    it than ``[environment] margin_m``: no plan could clear it."""
+    model = environment.collision_model(robot)
+    for (body, obstacle), distance in sorted(model.fixed_obstacle_distance.items()):
+        table = problem.environment.table_height_m
+        if distance >= environment.margin or obstacle != "table" or table is None:
+            continue
+        highest = math.floor((table - (environment.margin - distance)) * 1e3) / 1e3  # mm, rounded down
+        raise ProblemError(
+            str(problem.source) if problem.source else "<inline>",
+            "environment.table_height_m",
+            f"a table top at most {highest:.3f} m: {body} of {robot.name} "
+            f"turns about the vertical {distance * 1e3:.1f} mm above the table, closer than [environment] "
+            f"margin_m = {environment.margin:g} m in every configuration",
+            table,
+        )
+
+
+def _angles(theta: Array) -> str:
+    """Joint angles as a problem file writes them: ``[0.123, -1.571, …]`` (rad, 3 decimals)."""
+    return "[" + ", ".join(f"{t:.3f}" for t in theta) + "]"

@@ -224,7 +224,8 @@ class RobotSpec:
     start: str | tuple[float, ...] | None = key(
         None,
         "where the robot is when the plan starts: joint angles (rad, one per joint) or the name of an SRDF "
-        "configuration (default: the robot's reference configuration, its SRDF ready/default pose)",
+        "configuration (default: the robot's reference configuration, its SRDF ready/default pose; when "
+        "that is not clear of the environment, the clear configuration nearest it, named in a warning)",
     )
 
 

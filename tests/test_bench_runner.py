@@ -250,3 +250,37 @@ def test_readme_shows_every_results_folder_with_its_date_and_machine(
     assert "- `fake`:" not in text  # the fake module has no docstring to describe it
     (bench_dir / "bench_fake.py").write_text('"""A fake: ``run`` returns fixed numbers.\n\nMore."""\n' + FAKE)
     assert "- `fake`: A fake: `run` returns fixed numbers." in runner.readme(results, bench_dir)
+
+
+def test_cell_benchmark_counts_outcomes_and_reasons(runner: ModuleType) -> None:
+    """bench_cells' summary of synthetic outcomes: counts per outcome and category, refusals by reason
+    (a ProblemError by its key, list indices left out), the verified share, and the runner's rows."""
+    cells_bench = runner.load_module(runner.BENCH_DIR / "bench_cells.py")
+    from optlight.errors import ProblemError, UnreachableError
+
+    assert cells_bench.reason_key(ProblemError("f", "environment.boxes[3].name", "x")) == (
+        "ProblemError:environment.boxes[].name"
+    )
+    assert cells_bench.reason_key(UnreachableError("landmark 4 (zenith 26.0°) is out of reach")) == (
+        "UnreachableError:landmark (zenith °) is out of"  # the first six words
+    )
+    labels = {"robot": "ur5", "object": "face", "task": "rti", "environment": "none"}
+    outcomes = [
+        {"seed": 0, "outcome": "verified", "time_s": 2.0, "labels": labels},
+        {"seed": 1, "outcome": "verified", "time_s": 4.0, "labels": {**labels, "robot": "panda"}},
+        {"seed": 2, "outcome": "refused", "reason": "ProblemError:robot.start", "time_s": 1.0, "labels": labels},
+        {"seed": 3, "outcome": "crashed", "traceback": "Traceback ...", "time_s": 1.0, "labels": labels},
+    ]
+    summary = cells_bench.summarize(outcomes)
+    assert summary["counts"] == {
+        "verified": 2, "failed_verification": 0, "refused": 1, "crashed": 1, "timeout": 0
+    }
+    assert summary["verified_pct"] == 50.0
+    assert summary["refused_by_reason"] == {"ProblemError:robot.start": 1}
+    assert summary["per_category"]["robot"]["ur5"]["verified"] == 1
+    assert summary["solve_s"]["median"] == 3.0
+    assert [c["seed"] for c in summary["not_verified"]] == [2, 3]
+    summary["verified_pct"] = {"median": 50.0, "p98": 50.0}
+    rows = runner.cell_rows("cells", summary)
+    assert rows[0].median == 50.0
+    assert any(r.metric == "refused: ProblemError:robot.start [cells]" and r.median == 1 for r in rows)

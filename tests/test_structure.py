@@ -28,7 +28,7 @@ LAYERS: list[set[str]] = [
     {"spec"},
     {"geometry", "motion"},
     {"scene", "robot"},
-    {"objectives", "environment", "photometric_stereo"},
+    {"objectives", "environment", "photometric_stereo", "random_cells"},
     {"setup"},
     {"capture"},
     {"planning"},

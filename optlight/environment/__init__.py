@@ -11,10 +11,14 @@ Three models of the same geometry, from coarse to exact:
 
 - the NLPs see spheres fitted to each robot body (:mod:`.spheres`; they contain the body's convex
   collision shapes) against analytic obstacles (:mod:`.shapes`): row ``(s, o)`` of the clearance is
-  sd_o(c_s(θ)) − r_s − margin, row ``(s, t)`` of two bodies that can collide is
-  |c_s(θ) − c_t(θ)| − r_s − r_t − self_margin, a view row is sd_cone(c_s(θ)) − r_s, and a beam
-  row is sd_beam(c_s(θ); a(θ)) − r_s, the beam's cone from the light a(θ) to the object
-  (:class:`BeamCone`): what blocks the beam at a capture is planned around as what blocks the view;
+  sd_o(c_s(θ)) − r_s − margin (less where the sphere is closer at the reference configuration, which
+  the exact shapes clear: ``CollisionModel.obstacle_row_margin``), row ``(s, t)`` of two bodies that
+  can collide is
+  |c_s(θ) − c_t(θ)| − r_s − r_t − self_margin (less where the two spheres are closer at the
+  reference configuration, which the exact shapes clear: ``CollisionModel.self_row_margin``), a view
+  row is sd_cone(c_s(θ)) − r_s, and a beam row is sd_beam(c_s(θ); a(θ)) − r_s, the beam's cone from
+  the light a(θ) to the object (:class:`BeamCone`): what blocks the beam at a capture is planned
+  around as what blocks the view;
 - :meth:`Environment.sphere_clearance` evaluates the same rows with NumPy and pinocchio's kinematics
   (the reference the CasADi graph is tested against);
 - :meth:`Environment.check` computes exact distances with coal between the robot's collision shapes,
@@ -324,9 +328,9 @@ class Environment:
         if rows.size == 0:
             return math.inf, ""
         k = int(np.argmin(rows))
-        return float(rows[k]), self._row_labels(robot)[k]
+        return float(rows[k]), self.row_labels(robot)[k]
 
-    def _row_labels(self, robot: Robot) -> tuple[str, ...]:
+    def row_labels(self, robot: Robot) -> tuple[str, ...]:
         """:meth:`clearance_labels` then :meth:`view_labels`, made once per robot: the placement asks
         for the worst row at every posture it tries (111k labels made for 144 captures, 0.5 s)."""
         key = id(robot)
@@ -369,12 +373,12 @@ class Environment:
             centers = self._symbolic_centers(robot, cm.spheres, theta)
             r = cm.spheres.radii
             rows = [
-                self.obstacles[o].signed_distance_sx(centers[s]) - r[s] - self.margin
-                for s, o in cm.obstacle_rows
+                self.obstacles[o].signed_distance_sx(centers[s]) - r[s] - m
+                for (s, o), m in zip(cm.obstacle_rows, cm.obstacle_row_margin, strict=True)
             ]
             rows += [
-                ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - self.self_margin
-                for s, t in cm.self_rows
+                ca.sqrt(ca.sumsqr(centers[s] - centers[t]) + SMOOTHING_M**2) - r[s] - r[t] - m
+                for (s, t), m in zip(cm.self_rows, cm.self_row_margin, strict=True)
             ]
             self._rows_sx[key] = (robot, theta, rows)
         return self._rows_sx[key][1], self._rows_sx[key][2]
@@ -436,9 +440,9 @@ class Environment:
         for o in np.unique(cm.obstacle_rows[:, 1]):  # one call per obstacle, over all its spheres
             rows = np.flatnonzero(cm.obstacle_rows[:, 1] == o)
             spheres = cm.obstacle_rows[rows, 0]
-            obs[rows] = self.obstacles[o].signed_distance(c[spheres]) - r[spheres] - self.margin
+            obs[rows] = self.obstacles[o].signed_distance(c[spheres]) - r[spheres] - cm.obstacle_row_margin[rows]
         d = c[cm.self_rows[:, 0]] - c[cm.self_rows[:, 1]]
-        own = np.sqrt(np.sum(d * d, axis=1) + SMOOTHING_M**2) - r[cm.self_rows].sum(axis=1) - self.self_margin
+        own = np.sqrt(np.sum(d * d, axis=1) + SMOOTHING_M**2) - r[cm.self_rows].sum(axis=1) - cm.self_row_margin
         clearance = np.concatenate([obs, own])
         view = (
             self.view_cone.signed_distance(c[cm.view_rows]) - r[cm.view_rows]

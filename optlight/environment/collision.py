@@ -39,7 +39,7 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
-from optlight.environment.shapes import Obstacle, ViewCone
+from optlight.environment.shapes import SMOOTHING_M, HalfSpace, Obstacle, ViewCone
 from optlight.environment.spheres import BodySpheres, RobotSpheres, fit_spheres
 from optlight.errors import RobotError
 from optlight.robot.loading import ROBOTS, Robot, example_robot_data_dir
@@ -47,6 +47,13 @@ from optlight.robot.loading import ROBOTS, Robot, example_robot_data_dir
 Array = NDArray[np.float64]
 PairKind = Literal["obstacle", "self", "view"]
 
+#: A row whose spheres are closer than the margin at the (exactly clear) reference configuration
+#: keeps this much less than they are there (m; :meth:`CollisionModel._self_row_margins`,
+#: :meth:`CollisionModel._obstacle_row_margins`): more than the 2 mm the placements hold their
+#: postures inside every row (``optlight.environment.CAPTURE_SLACK``), so that a posture near the
+#: reference is still a capture posture (with 1 mm, a UR5 over a table at its base's height had no
+#: light clear: its upper arm's sphere keeps about the same height at every angle).
+REFERENCE_SLACK_M = 0.005
 #: Sphere–obstacle rows are kept when the sphere can come this close beyond the margin (m).
 PRUNE_SLACK_M = 0.05
 #: Name of the light housing body.
@@ -116,10 +123,17 @@ def _surface(geometry: coal.CollisionGeometry, name: str) -> trimesh.Trimesh:
 
 
 def _convex(geometry: coal.CollisionGeometry) -> coal.CollisionGeometry:
-    """Meshes become their convex hull (coal Convex); primitives stay."""
+    """Meshes become their convex hull (coal Convex, the hull's vertices and faces by Qhull);
+    primitives stay.
+
+    Not ``BVHModel.buildConvexRepresentation``: its Convex keeps every vertex of the mesh, those
+    inside the hull too, and GJK's support search (hill climbing over vertex neighbours) stops at
+    them. Between two UR10 links 19 mm apart it reported 465 mm."""
     if isinstance(geometry, coal.BVHModelBase):
-        geometry.buildConvexRepresentation(False)
-        return geometry.convex
+        points = coal.StdVec_Vec3s()
+        for p in np.asarray(geometry.vertices(), float):
+            points.append(p)
+        return coal.Convex.convexHull(points, False, "")
     return geometry
 
 
@@ -130,8 +144,11 @@ class CollisionModel:
     (tuple of :class:`Body`, robot links then the light); ``obstacles``; ``view_cone`` (or None);
     ``pairs`` (tuple of :class:`Pair`); ``ignored_self_pairs`` (body-name pairs in contact at θ_ref);
     ``spheres`` (:class:`RobotSpheres`, same body order); ``obstacle_rows`` ((S_o, 2) int: sphere,
-    obstacle index), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``view_rows`` (sphere indices),
-    ``beam_rows`` (sphere indices: those not on the light's joint);
+    obstacle index), ``obstacle_row_margin`` ((S_o,) m: each row's margin,
+    :meth:`_obstacle_row_margins`), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``self_row_margin`` ((S_s,) m:
+    each self row's margin, :meth:`_self_row_margins`), ``view_rows`` (sphere indices), ``beam_rows``
+    (sphere indices: those not on the light's joint); ``fixed_obstacle_distance`` ((body, obstacle) →
+    m: the pairs no motion changes, with their exact distance, :meth:`_fixed_obstacle_distances`);
     ``motion_weights`` (G, n): ρ such that a point of geometry g moves at most Σ_i ρ[g, i] |Δθ_i|
     between two configurations (m per rad, or m per m for prismatic joints).
     """
@@ -212,7 +229,12 @@ class CollisionModel:
         pin.updateGeometryPlacements(
             model, robot.data, geom, self.geometry_data, robot.to_pin(robot.theta_ref)
         )
-        touching = {(a, b) for a, b in candidates if self.distance(a, b) <= 0.0}
+        reference = {(a, b): self.distance(a, b) for a, b in candidates}
+        touching = {pair for pair, d in reference.items() if d <= 0.0}
+        exact_ref: dict[tuple[str, str], float] = {}
+        for (a, b), d in reference.items():
+            pair = _ordered(body_of[a].name, body_of[b].name)
+            exact_ref[pair] = min(exact_ref.get(pair, np.inf), d)
         self.ignored_self_pairs = tuple(sorted({(body_of[a].name, body_of[b].name) for a, b in touching}))
         moving = [g for g in range(n_robot) if geom.geometryObjects[g].parentJoint != 0]
         pairs = [
@@ -237,11 +259,13 @@ class CollisionModel:
                 for b in self.bodies
             )
         )
+        self.fixed_obstacle_distance = self._fixed_obstacle_distances(obstacle_ids, body_of)
         self.obstacle_rows, self.view_rows = self._reachable_rows()
         # The beam: every sphere but those carried with the light (they stand where they stand
         # relative to its beam at any θ, so no plan can move them out of it).
         light_joint = int(model.frames[robot.light_frame_id].parentJoint)
         self.beam_rows = np.flatnonzero(self.spheres.joint != light_joint)
+        self.obstacle_row_margin = self._obstacle_row_margins(robot, obstacle_ids)
         body_index = {b.name: i for i, b in enumerate(self.bodies)}
         self_bodies = sorted(
             {
@@ -260,8 +284,50 @@ class CollisionModel:
             ],
             dtype=int,
         ).reshape(-1, 2)
+        self.self_row_margin = self._self_row_margins(robot, touching_free=exact_ref)
 
     # ------------------------------------------------------------------ helpers
+    def _obstacle_row_margins(self, robot: Robot, obstacle_ids: list[int]) -> Array:
+        """(S_o,) the margin of each (sphere, obstacle) row (m): ``margin``, lowered to what the
+        sphere keeps from the obstacle at θ_ref less :data:`REFERENCE_SLACK_M` where it comes closer
+        there while its body's exact distance to the obstacle is at least the margin (the reasons of
+        :meth:`_self_row_margins`; a UR5's upper-arm sphere over a table at its base's height, 0.2 mm
+        into it while the arm is 24 mm above it). Called with the geometry placed at θ_ref."""
+        sp, rows = self.spheres, self.obstacle_rows
+        margins = np.full(len(rows), self.margin)
+        if not len(rows):
+            return margins
+        c = sp.world_centers(robot.model, robot.data, robot.to_pin(robot.theta_ref))
+        exact: dict[tuple[int, int], float] = {}
+        for k, (s, o) in enumerate(rows):
+            b = int(sp.body[s])
+            if (b, o) not in exact:
+                exact[b, o] = min(self.distance(g, obstacle_ids[o]) for g in self.bodies[b].geometries)
+            gap = float(self.obstacles[o].signed_distance(c[s : s + 1])[0]) - sp.radii[s]
+            if exact[b, o] >= self.margin and gap < self.margin:
+                margins[k] = gap - REFERENCE_SLACK_M
+        return margins
+
+    def _self_row_margins(self, robot: Robot, touching_free: dict[tuple[str, str], float]) -> Array:
+        """(S_s,) the margin of each self row (m): ``self_margin``, lowered to what the two spheres
+        keep at θ_ref less :data:`REFERENCE_SLACK_M` where the spheres come closer there than the
+        margin while the two bodies' exact distance is at least the margin. The reference
+        configuration is clear (coal); spheres closer there are the fit's excess over the shapes
+        (up to a few cm), and a row below 0 at θ_ref would make every plan that starts or passes
+        there infeasible for the NLPs. ``touching_free``: exact distance per self body pair at θ_ref."""
+        sp, rows = self.spheres, self.self_rows
+        margins = np.full(len(rows), self.self_margin)
+        if not len(rows):
+            return margins
+        c = sp.world_centers(robot.model, robot.data, robot.to_pin(robot.theta_ref))
+        gap = np.sqrt(np.sum((c[rows[:, 0]] - c[rows[:, 1]]) ** 2, axis=1) + SMOOTHING_M**2)
+        gap -= sp.radii[rows].sum(axis=1)
+        names = [b.name for b in sp.bodies]
+        for k, (s, t) in enumerate(rows):
+            pair = _ordered(names[sp.body[s]], names[sp.body[t]])
+            if touching_free.get(pair, -np.inf) >= self.self_margin and gap[k] < self.self_margin:
+                margins[k] = gap[k] - REFERENCE_SLACK_M
+        return margins
     def distance(self, a: int, b: int) -> float:
         """coal distance (m, < 0 in contact) between geometry objects a and b at the current placements."""
         req, res = coal.DistanceRequest(), coal.DistanceResult()
@@ -315,8 +381,35 @@ class CollisionModel:
                     weights[g, model.joints[j].idx_v] = self._link_length(chain[i + 1 :]) + extent
         return weights
 
+    def _fixed_obstacle_distances(
+        self, obstacle_ids: list[int], body_of: dict[int, Body]
+    ) -> dict[tuple[str, str], float]:
+        """Exact distances (m) of the (body, obstacle) pairs no motion changes: a body on the robot's
+        first joint, a revolute joint whose axis is the normal of a half-space obstacle (a base joint
+        turning about the vertical over a table), keeps every point's height over it. Measured at
+        θ_ref (the geometry placements are θ_ref's when this is called)."""
+        model, data = self.robot.model, self.robot.data
+        pin.computeJointJacobians(model, data, self.robot.to_pin(self.robot.theta_ref))
+        out: dict[tuple[str, str], float] = {}
+        for oid, obs in zip(obstacle_ids, self.obstacles, strict=True):
+            if not isinstance(obs, HalfSpace):
+                continue
+            for g, body in body_of.items():
+                j = body.joint
+                if j == 0 or model.parents[j] != 0 or self._travel(j) > 0.0:
+                    continue
+                axis = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)[3:, model.joints[j].idx_v]
+                if abs(abs(float(axis @ obs.normal)) - 1.0) > 1e-9:
+                    continue
+                key = (body.name, obs.name)
+                out[key] = min(out.get(key, np.inf), self.distance(g, oid))
+        return out
+
     def _reachable_rows(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-        """(sphere, obstacle) rows and view-cone sphere rows that can come within margin + slack."""
+        """(sphere, obstacle) rows and view-cone sphere rows that can come within margin + slack; a
+        body's rows against an obstacle it keeps a fixed distance from, at least the margin
+        (:attr:`fixed_obstacle_distance`), are left out: no motion can break them, and the spheres'
+        excess over the shape there would be a violation no motion can mend either."""
         model, sp = self.robot.model, self.spheres
         rows, view = [], []
         for s in range(len(sp)):
@@ -327,10 +420,21 @@ class CollisionModel:
             origin = model.jointPlacements[chain[0]].translation[None, :]
             reach = self._travel(chain[0]) + self._link_length(chain[1:]) + np.linalg.norm(sp.centers[s])
             reach += sp.radii[s] + self.margin + PRUNE_SLACK_M
-            rows += [(s, o) for o, obs in enumerate(self.obstacles) if obs.signed_distance(origin)[0] < reach]
+            body = sp.bodies[int(sp.body[s])].name
+            rows += [
+                (s, o)
+                for o, obs in enumerate(self.obstacles)
+                if obs.signed_distance(origin)[0] < reach
+                and self.fixed_obstacle_distance.get((body, obs.name), -np.inf) < self.margin
+            ]
             if self.view_cone is not None and self.view_cone.signed_distance(origin)[0] < reach:
                 view.append(s)
         return np.array(rows, dtype=int).reshape(-1, 2), np.array(view, dtype=int)
+
+
+def _ordered(a: str, b: str) -> tuple[str, str]:
+    """The body-name pair in sorted order (a key for either order)."""
+    return (a, b) if a <= b else (b, a)
 
 
 def _transform(m: pin.SE3) -> coal.Transform3s:

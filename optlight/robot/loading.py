@@ -159,6 +159,12 @@ _UR_TORQUE_SOURCE = "Universal Robots, Max. joint torques (universal-robots.com)
 _UR3_TORQUE = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
 _UR5_TORQUE = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
 _UR10_TORQUE = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
+#: The link pairs of a UR arm that cannot collide (MoveIt's "Adjacent" and "Never"): example-robot-data
+#: ships them for the UR5 only, but they are the same for every UR of its URDFs (the same link names
+#: and joint layout, scaled), as Universal Robots' own MoveIt configuration has one SRDF macro for
+#: every UR type (ur_moveit_config, srdf/ur_macro.srdf.xacro). Without them the UR10's base_link and
+#: upper_arm_link, 18–20 mm apart in every configuration (the shoulder offset), count as a self pair.
+_UR_SRDF = "ur_description/srdf/ur5.srdf"
 
 
 ROBOTS: dict[str, RobotInfo] = {
@@ -179,7 +185,7 @@ ROBOTS: dict[str, RobotInfo] = {
     ),
     "ur3": RobotInfo(
         "ur_description/urdf/ur3_robot.urdf",
-        None,
+        _UR_SRDF,
         "tool0",
         theta_ref=_UR_REFERENCE,
         torque_limit=_UR3_TORQUE,
@@ -199,7 +205,7 @@ ROBOTS: dict[str, RobotInfo] = {
     ),
     "ur10": RobotInfo(
         "ur_description/urdf/ur10_robot.urdf",
-        None,
+        _UR_SRDF,
         "tool0",
         theta_ref=_UR_REFERENCE,
         torque_limit=_UR10_TORQUE,
