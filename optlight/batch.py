@@ -60,6 +60,7 @@ import logging
 import math
 import os
 import re
+import shutil
 import tempfile
 import time
 import warnings
@@ -69,8 +70,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from optlight import interrupts
 from optlight.errors import OptlightError, ProblemError, UsageError
-from optlight.export import MANIFEST, check_output_folder, write_folder
+from optlight.export import MANIFEST, STAGING_PREFIX, check_output_folder, write_folder
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
@@ -547,6 +549,7 @@ def dask_client(
                 # the row's record, not Dask's log
                 silence_logs=logging.CRITICAL,
             )
+            interrupts.reached("cluster-started")
             client = Client(cluster)
         else:
             try:
@@ -564,6 +567,7 @@ def dask_client(
                     f"the Dask scheduler at {scheduler!r} has no worker after {timeout_s:g} s; "
                     "start some with `dask worker ADDRESS`"
                 ) from None
+        interrupts.reached("client-connected")
         yield client
     finally:
         if client is not None:
@@ -593,6 +597,7 @@ def run_tasks(
     from distributed import as_completed
 
     futures = [client.submit(fn, *args, pure=False) for fn, args in tasks]
+    interrupts.reached("tasks-submitted")
     index = {f.key: i for i, f in enumerate(futures)}
     for future in as_completed(futures):
         i = index[future.key]
@@ -635,6 +640,7 @@ def run_batch(
     out = Path(out)
     resume = check_batch_folder(out)
     spec = spec if isinstance(spec, BatchSpec) else load_batch_spec(spec)
+    interrupts.reached("spec-checked")
     out.mkdir(parents=True, exist_ok=True)
     if not resume:
         (out / BATCH_MARKER).write_text(
@@ -651,6 +657,7 @@ def run_batch(
         for i in todo
     ]
     with (
+        no_staging_left(plans, local=not serial and scheduler is None and client is None),  # left last
         engine(serial=serial or not todo, scheduler=scheduler, workers=workers, client=client) as client,
         progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance,
     ):
@@ -659,12 +666,34 @@ def run_batch(
             i = todo[k]
             records[i] = store_row(out, spec.rows[i], outcome)
             advance(spec.rows[i].id if outcome["status"] != "ok" else None)
+            interrupts.reached("row-done")
 
         used = 0 if client is None else len(client.scheduler_info(n_workers=-1)["workers"])
         run_tasks(client, tasks, on_done, lost={"status": "failed", "metrics": {}, "warnings": []})
+        interrupts.reached("rows-done")
+    interrupts.reached("cluster-closed")
     final = tuple(r for r in records if r is not None)
     csv_path, md_path = write_table(out, final, spec.keys)
+    interrupts.reached("table-written")
     return BatchResult(out, final, csv_path, md_path, used, time.perf_counter() - start, spec.keys)
+
+
+@contextmanager
+def no_staging_left(plans: Path, *, local: bool) -> Iterator[None]:
+    """On leaving, however (listed before the engine in a ``with``, after its local cluster closed):
+    when ``local``, remove the staging folders (:data:`~optlight.export.STAGING_PREFIX`) its workers
+    left in ``plans`` (a new plan's, beside its folder) or in a plan folder (an earlier plan's being
+    replaced) when the cluster was closed as they were saving a plan (a signal stopped the batch).
+    Remote workers are not stopped with the client: what they write is theirs to finish."""
+    try:
+        yield
+    finally:
+        if local:
+            for staging in [*plans.glob(f"{STAGING_PREFIX}*"), *plans.glob(f"*/{STAGING_PREFIX}*")]:
+                if staging.is_dir() and not staging.is_symlink():
+                    shutil.rmtree(staging, ignore_errors=True)
+                else:
+                    staging.unlink(missing_ok=True)
 
 
 def check_batch_folder(out: Path, option: str = "out") -> bool:

@@ -351,6 +351,7 @@ def write_results(
         (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
         for writer in writers:
             files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
+        interrupts.reached("figures")
         for name, png in (figures or {}).items():
             (staging / f"{name}.png").write_bytes(png())
         (staging / "plan.json").write_text(plan_text(files))
@@ -447,13 +448,16 @@ def write_folder(
     try:
         with interrupts.deferred():  # created, then removed by the finally below: never left behind
             staging.mkdir()
+        interrupts.reached("staging-created")
         files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
         names = sorted({str(f) for f in files})
         (staging / MANIFEST).write_text(
             json.dumps({"written_by": f"optlight {_version()}", "files": names}, indent=1) + "\n"
         )
+        interrupts.reached("staging-written")
         interrupts.check()  # an interrupt a library swallowed while writing
         with interrupts.deferred():
+            interrupts.reached("renames")  # held back until the output is in place
             _move_into_place(staging, target, names, option)
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
