@@ -44,8 +44,10 @@ solves needs; its strengths (actors, GPUs, shared objects) are of no use here. O
 against seconds per plan.
 
 Processes: a local cluster (one single-threaded worker process per core unless ``workers`` says) is
-started for the run and closed, with its client, in ``finally`` blocks; nothing outlives the call but
-the standard library's one ``multiprocessing`` resource tracker, which lives as long as the caller.
+started for the run and closed, with its client, in ``finally`` blocks, also when a signal stops the
+run (:mod:`optlight.interrupts`; a plan a worker was saving then leaves no staging folder); nothing
+outlives the call but the standard library's one ``multiprocessing`` resource tracker, which lives as
+long as the caller.
 Worker processes are spawned, so a script that calls :func:`run_batch` needs the usual ``if __name__
 == "__main__":`` guard.
 """

@@ -17,8 +17,9 @@ written over files optlight did not write. The output policy (:func:`check_outpu
 - a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
   existing file is replaced only with ``overwrite``, a folder never.
 
-The final renames run with Ctrl-C deferred (:func:`optlight.interrupts.deferred`), so an output
-appears whole or not at all; until then an interrupt removes the staging folder or temporary file.
+The final renames run with the stop signals (Ctrl-C, SIGTERM, SIGHUP) deferred
+(:func:`optlight.interrupts.deferred`), so an output appears whole or not at all; until then a signal
+removes the staging folder or temporary file.
 
 lights.lp follows the PTM / relight convention: the first line is the number of images, then one line
 ``filename x y z`` per image, (x, y, z) the unit vector from the object towards the light with x to
