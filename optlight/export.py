@@ -455,8 +455,8 @@ def write_folder(
         (staging / MANIFEST).write_text(
             json.dumps({"written_by": f"optlight {_version()}", "files": names}, indent=1) + "\n"
         )
-        interrupts.reached("staging-written")
         interrupts.check()  # an interrupt a library swallowed while writing
+        interrupts.reached("staging-written")
         with interrupts.deferred():
             interrupts.reached("renames")  # held back until the output is in place
             _move_into_place(staging, target, names, option)
