@@ -39,6 +39,8 @@ from optlight.export import MANIFEST, STAGING_PREFIX
 TINY = "[camera]\nwidth = 48\nheight = 48\n\n[landmarks]\ncount = 3\nallow_partial = true\n"
 #: A batch of one row (the tiny problem), solved on a local cluster of one worker.
 BATCH = 'problem = "tiny.toml"\n\n[[rows]]\nlabel = "near"\n"robot.base_position_m" = [0.0, 0.0, 0.0]\n'
+#: A cell search over two base placements of the tiny problem, three given lights, the best solved.
+CELL = 'problem = "tiny.toml"\nlights = [[40.0, 0.0], [40.0, 120.0], [40.0, 240.0]]\nsteps = 2\ntop = 1\n[search]\nbase_x_m = [-0.1, 0.1]\n'
 #: Stages after which the output is in place: the signal leaves it whole.
 WRITTEN = {"renames", "figure-worker-closing", "table-written", "done"}
 
@@ -76,6 +78,8 @@ BATCH_CASES = [
     ("table-written", "SIGTERM"),
     ("done", "SIGTERM"),
 ]
+#: (stage, signal) of ``optlight cell`` on a local cluster.
+CELL_CASES = [("client-connected", "SIGTERM"), ("tasks-submitted", "SIGHUP")]
 
 
 @dataclass
@@ -166,6 +170,7 @@ def root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("signals")
     (folder / "tiny.toml").write_text(f'description = "tiny"\n\n{TINY}')
     (folder / "batch.toml").write_text(BATCH)
+    (folder / "cell.toml").write_text(CELL)
     return folder
 
 
@@ -205,6 +210,19 @@ def batch_runs(root: Path) -> dict[tuple, Outcome]:
         (folder / "earlier" / "plan.json").write_text('{"an": "earlier output"}\n')
         args = ["batch", "../batch.toml", "--out", "out", "--workers", "1"]
         jobs[case] = (args, folder, f"{stage}:{signame}")
+    return run_all(jobs)
+
+
+@pytest.fixture(scope="module")
+def cell_runs(root: Path) -> dict[tuple, Outcome]:
+    """Every case of :data:`CELL_CASES` on a local cluster of one worker, each in a folder of its own
+    holding a user's file."""
+    jobs = {}
+    for i, case in enumerate(CELL_CASES):
+        folder = root / f"cell{i}"
+        folder.mkdir()
+        (folder / "mine.txt").write_text("the user's notes\n")
+        jobs[case] = (["cell", "../cell.toml", "--out", "out", "--workers", "1"], folder, ":".join(case))
     return run_all(jobs)
 
 
@@ -252,6 +270,15 @@ def test_a_signalled_batch_stops_cleanly_and_keeps_the_files(
     assert {p: h for p, h in outcome.after.items() if p != "out" and not p.startswith("out/")} == outside
     if stage in WRITTEN:
         assert (outcome.folder / "out" / "results.csv").is_file()
+
+
+@pytest.mark.parametrize("case", CELL_CASES, ids=[case_id(c) for c in CELL_CASES])
+def test_a_signalled_cell_search_stops_cleanly_and_keeps_the_files(
+    case: tuple[str, str], cell_runs: dict[tuple, Outcome]
+) -> None:
+    outcome = cell_runs[case]
+    assert_stopped(outcome, case[1])
+    assert outcome.after == outcome.before  # no output folder: it is written at the end, whole
 
 
 def test_signals_are_latched_deferred_and_named() -> None:
