@@ -659,7 +659,7 @@ def run_batch(
         for i in todo
     ]
     with (
-        no_staging_left(plans, local=not serial and scheduler is None and client is None),  # left last
+        no_staging_left(out, local=not serial and scheduler is None and client is None),  # left last
         engine(serial=serial or not todo, scheduler=scheduler, workers=workers, client=client) as client,
         progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance,
     ):
@@ -681,17 +681,19 @@ def run_batch(
 
 
 @contextmanager
-def no_staging_left(plans: Path, *, local: bool) -> Iterator[None]:
+def no_staging_left(out: Path, *, local: bool) -> Iterator[None]:
     """On leaving, however (listed before the engine in a ``with``, after its local cluster closed):
     when ``local``, remove the staging folders (:data:`~optlight.export.STAGING_PREFIX`) its workers
-    left in ``plans`` (a new plan's, beside its folder) or in a plan folder (an earlier plan's being
-    replaced) when the cluster was closed as they were saving a plan (a signal stopped the batch).
-    Remote workers are not stopped with the client: what they write is theirs to finish."""
+    left when they were stopped as they saved a plan (a signal stopped the batch): a new plan's
+    beside its folder (in ``out/plans``, or in ``out`` before ``plans`` existed), an earlier plan's
+    in its folder. Remote workers are not stopped with the client: what they write is theirs to
+    finish."""
     try:
         yield
     finally:
         if local:
-            for staging in [*plans.glob(f"{STAGING_PREFIX}*"), *plans.glob(f"*/{STAGING_PREFIX}*")]:
+            patterns = (f"{STAGING_PREFIX}*", f"{PLANS}/{STAGING_PREFIX}*", f"{PLANS}/*/{STAGING_PREFIX}*")
+            for staging in [path for pattern in patterns for path in out.glob(pattern)]:
                 if staging.is_dir() and not staging.is_symlink():
                     shutil.rmtree(staging, ignore_errors=True)
                 else:

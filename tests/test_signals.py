@@ -376,3 +376,26 @@ def test_every_command_stops_the_same_way_in_process(
     assert main(command) == 128 + signum
     assert capfd.readouterr().err == f"optlight: {interrupts.SIGNALS[signum]}\n"
     assert snapshot(tmp_path) == before
+
+
+def test_a_batch_removes_the_staging_folders_its_stopped_workers_left(tmp_path: Path) -> None:
+    """A worker stopped as it saved a plan leaves its staging folder: beside the plan's folder (in
+    plans/, or in the batch folder before plans/ existed) or in the plan's folder. Leaving the batch's
+    engine removes them, and nothing else; with a remote cluster (whose workers go on) none."""
+    from optlight.batch import no_staging_left
+
+    kept = [tmp_path / "records" / "a.json", tmp_path / "plans" / "a" / "plan.json", tmp_path / "results.csv"]
+    for path in kept:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("{}")
+    staged = [tmp_path / "plans" / "a" / f"{STAGING_PREFIX}1", tmp_path / "plans" / f"{STAGING_PREFIX}2"]
+    staged += [tmp_path / f"{STAGING_PREFIX}3"]
+    for folder in staged:
+        (folder / "figures").mkdir(parents=True)
+        (folder / "figures" / "half.png").write_bytes(b"\x89PNG")
+    with pytest.raises(interrupts.Interrupt), no_staging_left(tmp_path, local=False):
+        raise interrupts.Interrupt(signal.SIGTERM)
+    assert all(folder.is_dir() for folder in staged)
+    with pytest.raises(interrupts.Interrupt), no_staging_left(tmp_path, local=True):
+        raise interrupts.Interrupt(signal.SIGTERM)
+    assert not any(folder.exists() for folder in staged) and all(path.is_file() for path in kept)
