@@ -62,7 +62,7 @@ SOLVE_MODULES = ("optlight.preflight", "optlight.pipeline", "optlight.report", "
 
 
 def _import(modules: Sequence[str]) -> None:
-    """Import ``modules`` with Ctrl-C deferred (see :data:`MODULES`)."""
+    """Import ``modules`` with the stop signals deferred (see :data:`MODULES`)."""
     with interrupts.deferred():
         interrupts.reached("imports")
         for module in modules:

@@ -691,7 +691,7 @@ def test_any_out_target_is_refused_whole_or_written_whole(
 
 
 # --------------------------------------------------------------------------------------------
-# Ctrl-C at random moments of a solve
+# Ctrl-C: the interrupt latch in-process (signals at named stages of real commands: test_signals.py)
 # --------------------------------------------------------------------------------------------
 
 
