@@ -1,11 +1,12 @@
 """Stop signals (Ctrl-C, SIGTERM, SIGHUP) that no library can swallow, and sections they cannot cut in half.
 
 A command stops the same way whichever of :data:`SIGNALS` arrives: SIGINT (Ctrl-C), SIGTERM (what
-``kill``, ``timeout``, systemd and batch systems send) or SIGHUP (the terminal closed). Under
-:func:`latched` each raises :class:`Interrupt`, a KeyboardInterrupt that names its signal, so every
-``finally`` and ``with`` block on the way out runs (staging folders removed, worker processes and
-clusters closed); the command line then prints one line (``optlight: interrupted``, ``terminated``,
-``hung up``) and exits with status 128 + the signal's number (130, 143, 129).
+``kill``, ``timeout``, systemd and batch systems send) or SIGHUP (the terminal closed), unless it is
+ignored (``nohup``'s SIGHUP stays ignored). Under :func:`latched` each raises :class:`Interrupt`, a
+KeyboardInterrupt that names its signal, so every ``finally`` and ``with`` block on the way out runs
+(staging folders removed, worker processes and clusters closed); the command line then prints one
+line (``optlight: interrupted``, ``terminated``, ``hung up``) and exits with status 128 + the
+signal's number (130, 143, 129).
 
 Python turns SIGINT into KeyboardInterrupt, but some libraries catch it: CasADi's IPOPT interface
 stops the solve, prints a warning and returns the solution it had ("User_Requested_Stop"), and an
@@ -100,8 +101,13 @@ def reached(stage: str) -> None:
 
 
 def _install(handler: Any) -> dict[int, Any]:
-    """Set ``handler`` for every one of :data:`SIGNALS`; the handlers it replaced."""
-    return {signum: signal.signal(signum, handler) for signum in SIGNALS}
+    """Set ``handler`` for every one of :data:`SIGNALS` that is not ignored (``nohup``'s SIGHUP stays
+    ignored); the handlers it replaced."""
+    return {
+        signum: signal.signal(signum, handler)
+        for signum in SIGNALS
+        if signal.getsignal(signum) is not signal.SIG_IGN
+    }
 
 
 def _restore(previous: dict[int, Any]) -> None:

@@ -308,6 +308,16 @@ def test_signals_are_latched_deferred_and_named() -> None:
         assert done and raised.value.signum == signal.SIGHUP
     assert [interrupts.exit_status(s) for s in interrupts.SIGNALS] == [130, 143, 129]
 
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as under nohup: it stays ignored
+    try:
+        with interrupts.latched():
+            os.kill(os.getpid(), signal.SIGHUP)
+            time.sleep(0.2)
+            assert not interrupts.pending()
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+
 
 FIGURE_WORKER_CHILD = """
 import sys
