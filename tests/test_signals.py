@@ -24,6 +24,7 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -163,6 +164,19 @@ def run_all(jobs: dict[tuple, tuple[list[str], Path, str | None]]) -> dict[tuple
     with ThreadPoolExecutor(max_workers=2) as pool:
         futures = {key: pool.submit(run, *job) for key, job in jobs.items()}
         return {key: future.result() for key, future in futures.items()}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def signals_not_ignored() -> Iterator[None]:
+    """The stop signals handled in this process, so in the commands it starts too: started in the
+    background of a non-interactive shell it ignores SIGINT, under ``nohup`` SIGHUP, and the
+    commands would rightly go on ignoring them (an ignored disposition survives exec)."""
+    ignored = [s for s in interrupts.SIGNALS if signal.getsignal(s) is signal.SIG_IGN]
+    for signum in ignored:
+        signal.signal(signum, signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+    yield
+    for signum in ignored:
+        signal.signal(signum, signal.SIG_IGN)
 
 
 @pytest.fixture(scope="module")
