@@ -12,7 +12,7 @@ OUT    ?= results/default
 $(STAMP): pyproject.toml
 	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,mitsuba]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,mitsuba,sim]'
 	@touch $(STAMP)
 
 demo: $(STAMP)

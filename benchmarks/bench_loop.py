@@ -88,7 +88,7 @@ REFERENCES: dict[str, tuple[str, float, float]] = {
     "photograph_10deg": ("photograph", 10.0, 0.0),
     "rendered_10deg": ("rendered", 10.0, 0.0),
 }
-#: The suite the issue's target is measured on.
+#: The reference whose suite the loop's target is measured on.
 TARGET_REFERENCE = "photograph"
 
 

@@ -29,7 +29,7 @@ from optlight.scene.gbuffer import RayCaster, build_gbuffer
 from optlight.scene.luminance import luminance_function
 from optlight.scene.objects import build_object
 
-#: Targets from the scene issue: render ≤ 50 ms at 256² once the G-buffer exists, value+gradient ≤ 1 ms at 64².
+#: Targets of the scene: render ≤ 50 ms at 256² once the G-buffer exists, value+gradient ≤ 1 ms at 64².
 TARGETS_MS = {"render_256_shadows": 50.0, "render_256_no_shadows": 50.0, "objective_value_gradient_64": 1.0}
 
 

@@ -33,6 +33,8 @@ from optlight.spec import load_problem  # noqa: E402
 
 #: The per-knot IK baseline in ``baselines.py``: ``per_knot_ik_plan(problem) -> dict``.
 BASELINE = "per_knot_ik_plan"
+#: Quantities of our plans only: the moving time's rest-to-rest lower bound and their ratio.
+PLAN_KEYS = ("duration_s", "rest_to_rest_s", "motion_bound_ratio", "nlp_iterations")
 #: Quantities compared with the baseline: our name -> the baseline dict's key.
 BASELINE_KEYS = {
     "time_s": "time_s",
@@ -49,12 +51,15 @@ def _dist(values: Sequence[float]) -> dict[str, float]:
 def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
     plan = optlight.solve(problem)
     costs = [landmark.cost for landmark in plan.visited]
+    bound = plan.motion_bound()
     return {
         "time_s": plan.timings["total"],
         "stages_s": dict(plan.timings),
         "joint_path_length_rad": plan.joint_path_length,
         "motion_time_s": plan.motion_time,
         "duration_s": plan.trajectory.duration,
+        "rest_to_rest_s": bound["rest_to_rest_s"],
+        "motion_bound_ratio": bound["ratio"],
         "max_h_residual_m": plan.nlp.max_h_residual,
         "nlp_iterations": plan.nlp.iterations,
         "nlp_success": bool(plan.nlp.success),
@@ -72,7 +77,7 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
     spec = load_problem(problem)
     runs = [_solve_once(spec) for _ in range(repeats)]
     plan: dict[str, Any] = {
-        key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations")
+        key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, *PLAN_KEYS)
     }
     stages = list(dict.fromkeys(stage for r in runs for stage in r["stages_s"]))  # in pipeline order
     plan["stages_s"] = {s: _dist([r["stages_s"][s] for r in runs if s in r["stages_s"]]) for s in stages}
@@ -106,7 +111,7 @@ def _print(result: dict[str, Any]) -> None:
         f"{result['repeats']} repeat(s), success {result['success_pct']:.0f} %"
     )
     print(f"{'quantity':24s} {'median':>12s} {'p98':>12s} {'baseline':>12s}")
-    for key in (*BASELINE_KEYS, "duration_s", "nlp_iterations"):
+    for key in (*BASELINE_KEYS, *PLAN_KEYS):
         theirs = (
             f"{baseline[key]['median']:12.4g}" if baseline is not None and key in baseline else f"{'–':>12s}"
         )

@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from optlight.export import write_json
+from optlight.motion import Trajectory
 from optlight.planning.jerk import jerk_limited_timing
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 
 VELOCITY_LIMIT = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])  # rad/s
 ACCELERATION_LIMIT = np.array([15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])  # rad/s²

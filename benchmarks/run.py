@@ -15,6 +15,12 @@ status is then 1. Printed: one table (benchmark / metric: median, p98, success %
 measured in the same run, ratio median / baseline median). Written to ``--out`` (default
 ``benchmarks/results/``): ``latest.json`` (machine, versions, timestamp, every benchmark's full result
 or error, the table rows) and ``latest.md`` (the table in markdown, with the machine line).
+
+``benchmarks/README.md`` is rendered from the latest results (:func:`readme`): the full run's
+``results/latest.json`` and every sub-run's ``results/<name>/latest.json`` (``--out
+benchmarks/results/<name>``), each with the date and machine it records. A run whose ``--out`` is
+``benchmarks/results`` or a folder in it renders it again at the end;
+``python benchmarks/run.py --readme-only`` renders it from the results as they are, running nothing.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ import json
 import math
 import os
 import platform
+import re
 import subprocess
 import sys
 import time
@@ -59,6 +66,8 @@ from optlight.spec import available_problems, resolve_problem_path
 
 BENCH_DIR = Path(__file__).resolve().parent
 RESULTS_DIR = BENCH_DIR / "results"
+#: The benchmarks' README, rendered from :data:`RESULTS_DIR` by :func:`readme`.
+README = BENCH_DIR / "README.md"
 #: Module of the whole-pipeline benchmark, ``run(problem, repeats)``; every other ``bench_*.py`` is a component.
 PIPELINE_MODULE = "bench_solve"
 #: ``--quick`` sizes, passed to a benchmark's ``run`` only for the parameters it has.
@@ -175,6 +184,24 @@ class Report:
             if o.result is not None and o.result.get("baseline_missing")
         ]
 
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Report:
+        """The report a ``latest.json`` holds (:meth:`to_dict`'s output read back)."""
+        keys = ("benchmark", "metric", "median", "p98", "success_pct", "baseline_median")
+        outcomes = [
+            Outcome(
+                name=b["name"],
+                kwargs=b["kwargs"],
+                wall_s=b["wall_s"],
+                result=b["result"],
+                rows=[Row(**{k: row[k] for k in keys}) for row in b["rows"]],
+                error=b["error"],
+                traceback=b["traceback"],
+            )
+            for b in data["benchmarks"]
+        ]
+        return cls(data["timestamp"], data["quick"], data["machine"], outcomes)
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "timestamp": self.timestamp,
@@ -269,18 +296,19 @@ def _git_state() -> dict[str, Any] | None:
     return {"commit": commit, "dirty": dirty}
 
 
-def machine_line(machine: dict[str, Any]) -> str:
-    """The machine in one line: CPU, cores, RAM, OS, Python, library versions, commit."""
+def machine_line(machine: dict[str, Any], commit: bool = True) -> str:
+    """The machine in one line: CPU, cores, RAM, OS, Python, library versions, and (``commit``) the
+    git commit."""
     cores = f"{machine['cores']} cores"
     if machine["cores_usable"] != machine["cores"]:
         cores += f" ({machine['cores_usable']} usable)"
     ram = f", {machine['ram_gb']:g} GB RAM" if machine["ram_gb"] is not None else ""
     versions = ", ".join(f"{k} {v}" for k, v in machine["versions"].items() if v is not None)
-    git = machine["git"]
-    commit = (
+    git = machine["git"] if commit else None
+    revision = (
         "" if git is None else f"; git {git['commit'][:10]}{' + uncommitted changes' if git['dirty'] else ''}"
     )
-    return f"{machine['cpu']}, {cores}{ram}; {machine['os']}; Python {machine['python']}; {versions}{commit}"
+    return f"{machine['cpu']}, {cores}{ram}; {machine['os']}; Python {machine['python']}; {versions}{revision}"
 
 
 # --------------------------------------------------------------------------------------------
@@ -433,6 +461,11 @@ def solve_rows(name: str, result: Result) -> list[Row]:
         row("time [s]", "time_s", result["success_pct"]),
         row("joint path length [rad]", "joint_path_length_rad"),
         row("motion time [s]", "motion_time_s"),
+        *(
+            [row("rest-to-rest bound [s]", "rest_to_rest_s"), row("motion time / rest-to-rest bound", "motion_bound_ratio")]
+            if "motion_bound_ratio" in ours
+            else []
+        ),
         row("max |h| [m]", "max_h_residual_m"),
         Row(label, "NLP iterations", ours["nlp_iterations"]["median"], ours["nlp_iterations"]["p98"]),
     ]
@@ -697,8 +730,9 @@ def table(report: Report) -> Table:
     return out
 
 
-def markdown(report: Report) -> str:
-    """The same table in markdown, preceded by the title and machine line, failures listed after it."""
+def markdown(report: Report, commit: bool = True) -> str:
+    """The same table in markdown, preceded by the title and machine line (with the git commit when
+    ``commit``), failures listed after it."""
 
     def line(cells: Sequence[str]) -> str:
         return "| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |"
@@ -706,7 +740,7 @@ def markdown(report: Report) -> str:
     lines = [
         f"**{_title_line(report)}**",
         "",
-        f"Machine: {machine_line(report.machine)}",
+        f"Machine: {machine_line(report.machine, commit)}",
         "",
         line(COLUMNS),
         "|" + "|".join("---" if name in ("benchmark", "metric") else "---:" for name in COLUMNS) + "|",
@@ -750,6 +784,70 @@ def write(report: Report, out_dir: Path) -> tuple[Path, Path]:
     return json_path, md_path
 
 
+#: The README's text above the tables.
+README_INTRO = """# Benchmarks
+
+Generated by `python benchmarks/run.py --readme-only` from the latest results in `results/`; do not
+edit by hand.
+
+`optlight bench` (or `make bench`) runs every component benchmark (`bench_<name>.py`) and the whole
+pipeline on every problem in `problems/`, prints one table and writes `results/latest.json` (machine,
+library versions, every benchmark's full result) and `results/latest.md`. `optlight bench NAME --out
+benchmarks/results/NAME` runs one benchmark on its own into a folder of `results/`. `--quick` runs
+reduced sizes.
+
+Columns: the median and 98th percentile of a metric over its repeats, the success rate, and the
+*baseline* measured in the same run (the paper's sweep for the landmark search, pinocchio's CLIK for
+the IK, the paper's per-knot IK pipeline for the solve, the unconstrained plan for the environment,
+the design on the cap alone for the light sets, the open loop for the camera loop); ratio = median /
+baseline median. A shared machine's speed drifts between runs: compare a time with its baseline,
+measured beside it, rather than with another run's numbers.
+"""
+
+
+def _first_paragraph(path: Path) -> str:
+    """The first paragraph of a module's docstring, on one line (the module is not imported)."""
+    import ast
+
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+    text = " ".join(doc.split("\n\n")[0].split())
+    return re.sub(r":\w+:`", "`", text).replace("``", "`")  # reST roles and literals as markdown code
+
+
+def readme(results_dir: Path = RESULTS_DIR, bench_dir: Path = BENCH_DIR) -> str:
+    """benchmarks/README.md from the latest results: the full run (``results_dir/latest.json``), then
+    every sub-run (``results_dir/<name>/latest.json``), each with its date, its machine (without the
+    commit) and its table; the benchmarks of each described by their module's first paragraph."""
+    described = components(bench_dir)
+    described.setdefault(PIPELINE_MODULE.removeprefix("bench_"), bench_dir / f"{PIPELINE_MODULE}.py")
+
+    def section(heading: str, path: Path) -> list[str]:
+        report = Report.from_dict(json.loads(path.read_text(encoding="utf-8")))
+        names = sorted({o.name.split()[0] for o in report.outcomes})
+        about = {n: _first_paragraph(described[n]) for n in names if described.get(n, Path()).is_file()}
+        items = [f"- `{n}`: {text}" for n, text in about.items() if text]
+        return [heading, "", *items, *([""] if items else []), markdown(report, commit=False)]
+
+    parts = [README_INTRO]
+    if (results_dir / "latest.json").is_file():
+        parts += section("## Full run", results_dir / "latest.json")
+    for path in sorted(results_dir.glob("*/latest.json")):
+        parts += section(f"## `{path.parent.name}`", path)
+    return "\n".join(parts)
+
+
+def write_readme(results_dir: Path = RESULTS_DIR, path: Path = README) -> Path:
+    """Render :func:`readme` from ``results_dir`` into ``path``; returns the path."""
+    path.write_text(readme(results_dir))
+    return path
+
+
+def _in_results(out: Path) -> bool:
+    """Whether ``out`` is :data:`RESULTS_DIR` or a folder in it (the results the README shows)."""
+    out = out.resolve()
+    return out == RESULTS_DIR or out.parent == RESULTS_DIR
+
+
 def bench(
     names: Sequence[str] = (), quick: bool = False, out: Path | None = None, bench_dir: Path = BENCH_DIR
 ) -> int:
@@ -766,8 +864,11 @@ def bench(
     console.print(printed)
     for note in report.notes:
         console.print(Text(f"note: {note}"))
-    json_path, md_path = write(report, out if out is not None else RESULTS_DIR)
+    out_dir = out if out is not None else RESULTS_DIR
+    json_path, md_path = write(report, out_dir)
     console.print(Text(f"wrote {json_path} and {md_path}"))
+    if _in_results(out_dir):
+        console.print(Text(f"wrote {write_readme()}"))
     if report.failed:
         errors = Console(stderr=True)
         for outcome in report.failed:
@@ -787,7 +888,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--quick", action="store_true", help="reduced sizes and one solve per problem (CI)")
     parser.add_argument("--out", type=Path, help=f"output folder (default {RESULTS_DIR})")
+    parser.add_argument(
+        "--readme-only", action="store_true", help=f"render {README} from the latest results, run nothing"
+    )
     args = parser.parse_args(argv)
+    if args.readme_only:
+        print(f"wrote {write_readme()}")
+        return 0
     try:
         return bench(args.names, args.quick, args.out)
     except OptlightError as e:

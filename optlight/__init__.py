@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from optlight.errors import (
     OptlightError,
+    OutputError,
     ProblemError,
     RobotError,
     SolverError,
@@ -35,6 +36,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.capture.folder import FolderCamera
     from optlight.capture.mitsuba import MitsubaCamera
     from optlight.cell import CellResult, design_cell
+    from optlight.motion import Trajectory
     from optlight.objectives import Objective
     from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
@@ -42,10 +44,13 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.reach import ReachabilityMap, reachability_map
-    from optlight.planning.timing import Trajectory, time_parameterize
-    from optlight.robot import IKResult, Robot, generalized_ik, load_robot
+    from optlight.planning.timing import time_parameterize
+    from optlight.planning.waypoints import Waypoints, controller_waypoints
+    from optlight.report import FigureDrafts
+    from optlight.robot import Dynamics, IKResult, Lamp, Robot, generalized_ik, load_robot
     from optlight.scene import Camera, Scene
     from optlight.setup import Setup
+    from optlight.simulation import SimulationReport, simulate_folder
     from optlight.verify import VerificationReport, verify_trajectory
     from optlight.viz.drawing import FigureWorker
     from optlight.viz.images import save_gray_png
@@ -72,14 +77,21 @@ _LAZY = {
     "generalized_ik": "optlight.robot",
     "ReachabilityMap": "optlight.planning.reach",
     "reachability_map": "optlight.planning.reach",
-    "Trajectory": "optlight.planning.timing",
+    "Trajectory": "optlight.motion",
     "time_parameterize": "optlight.planning.timing",
+    "Waypoints": "optlight.planning.waypoints",
+    "controller_waypoints": "optlight.planning.waypoints",
+    "Dynamics": "optlight.robot",
+    "Lamp": "optlight.robot",
+    "SimulationReport": "optlight.simulation",
+    "simulate_folder": "optlight.simulation",
     "VerificationReport": "optlight.verify",
     "verify_trajectory": "optlight.verify",
     "Plan": "optlight.plan",
     "solve": "optlight.pipeline",
     "Preview": "optlight.viz.preview",
     "FigureWorker": "optlight.viz.drawing",
+    "FigureDrafts": "optlight.report",
     "save_gray_png": "optlight.viz.images",
     "acquire": "optlight.acquisition",
     "Acquisition": "optlight.acquisition",
@@ -107,6 +119,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     "LightSphere",
     "OptlightError",
+    "OutputError",
     "Problem",
     "ProblemError",
     "RobotError",

@@ -1,4 +1,4 @@
-"""The camera in the loop (DESIGN §11): plan, capture, calibrate, re-plan; the photometric servo; the
+"""The camera in the loop (docs/design.md §11): plan, capture, calibrate, re-plan; the photometric servo; the
 dataset folder.
 
 :func:`acquire` runs the loop::
@@ -16,15 +16,27 @@ dataset folder.
 4. the model is calibrated from every usable capture so far (:func:`~optlight.capture.calibration.calibrate`)
    and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
    through the same :func:`optlight.solve`;
-5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measured cost is not at
+5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measure is not at
    least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails to solve or
-   fails verification (the reason is the status; the first plan's is raised). The best plan by measured cost, by the
-   same rule (a later round replaces it only at least ``tolerance`` below), is the result; the first
-   plan is the open loop's.
+   fails verification (the reason is the status; the first plan's is raised). The best plan by its
+   measure, by the same rule (a later round replaces it only at least ``tolerance`` below), is the
+   result; the first plan is the open loop's.
 
-With a folder camera the images exist only for the plan the robot ran: the loop captures that
-plan, calibrates, re-plans, and stops with status ``awaiting captures`` and the next plan
-(``next/`` in the dataset) for the robot to run.
+The measure follows the task (:func:`round_measure`, :data:`MEASURES`): landmarks, the measured cost;
+a light set, the set's own measure (photometric stereo: the normal error of the normals recovered
+from the recorded images against the model's; RTI: the covering radius of the captured lights; a
+grid: the angle from its directions to the lights captured for them). Lower is better for each.
+
+With a real camera (the folder camera) the loop runs in rounds, one run of the command per round
+(:class:`RoundFolders`; the user's procedure is docs/camera-loop.md). Round i's plan is written to
+``round_ii/`` in the acquisition folder (its trajectory.csv, joint_trajectory.yaml and captures.csv
+with the trigger times), its images named ``rii_000.png`` … (:func:`round_pattern`, distinct across
+rounds); the user runs the robot, saves the images there and runs the command again. That run replays
+the loop: it plans round 0 again (the same problem gives the same plan), takes round 0's images,
+calibrates, plans round 1 on that calibration (the same images give the same plan) and so on, each
+plan checked against the captures.csv written for it, until the first round without images: it
+stops with status ``awaiting captures`` and writes that round's folder. Earlier rounds' folders are
+written again as they were, never the user's images.
 
 :func:`photometric_servo` is the local loop for one light: ViSP's photometric visual servoing with
 the light moving instead of the camera. The error is the measured cost J(Y) of the recorded image;
@@ -37,6 +49,7 @@ not lower the measured cost is undone and halved.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -50,16 +63,28 @@ from numpy.typing import ArrayLike, NDArray
 
 from optlight.capture import Capture, CaptureCamera, ModelCamera, write_capture_png
 from optlight.capture.calibration import Calibration, calibrate, calibrated_setup
-from optlight.capture.folder import FolderCamera, MissingCaptureError
-from optlight.errors import OptlightError, VerificationError
-from optlight.export import MANIFEST, library_versions, lp_direction, lp_text, write_captures, write_folder
+from optlight.capture.folder import FolderCamera, MissingCaptureError, read_captures_csv
+from optlight.errors import OptlightError, UsageError, VerificationError
+from optlight.export import (
+    LIGHT_DIRECTION_COLUMNS,
+    LIGHT_FRAME,
+    MANIFEST,
+    library_versions,
+    lp_direction,
+    lp_text,
+    write_captures,
+    write_folder,
+)
 from optlight.jsondata import json_safe
+from optlight.photometric_stereo import gbuffer_normal_map, recover_from_scene
 from optlight.pipeline import solve
 from optlight.plan import Plan
+from optlight.planning.lightsets import Cap, coverage
 from optlight.planning.nlp import sphere_position
 from optlight.robot import generalized_ik
+from optlight.scene import Camera
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, image_names
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -71,12 +96,79 @@ CAMERAS = ("model", "mitsuba", "folder")
 #: progress(iteration, stage, done, total): the loop's stage ("plan: <solve stage>", "capture",
 #: "calibrate") in the iteration (0-based).
 LoopProgress = Callable[[int, str, int, int], None]
+#: The kind of output in rounds (:mod:`optlight.export`'s manifest) of an acquisition with the folder
+#: camera: the same command continues it.
+ROUNDS = "optlight acquire --camera folder"
+#: Status of a loop that waits for the images of its next round.
+AWAITING = "awaiting captures"
 
 
-def make_camera(kind: str, setup: Setup, images: str | Path | None = None) -> CaptureCamera:
+def round_folder(index: int) -> str:
+    """The folder of round ``index`` (0: the open loop's plan) in an acquisition folder: ``round_00`` …."""
+    return f"round_{index:02d}"
+
+
+def round_pattern(index: int) -> str:
+    """The image names of round ``index``: ``r00_000.png`` …, distinct across rounds."""
+    return f"r{index:02d}_{{index:03d}}.png"
+
+
+def round_setup(setup: Setup, index: int) -> Setup:
+    """``setup`` whose exports name the images of round ``index`` (:func:`round_pattern`)."""
+    problem = setup.problem
+    trajectory = dataclasses.replace(problem.trajectory, image_pattern=round_pattern(index))
+    return dataclasses.replace(setup, problem=dataclasses.replace(problem, trajectory=trajectory))
+
+
+class RoundFolders:
+    """The folder camera of an acquisition in rounds (module docstring): round i's captures.csv in
+    ``folder/round_ii/`` and its images beside it.
+
+    Made before any work, it checks what is there: the rounds whose images are there, in order, each
+    with every check of :class:`FolderCamera` (one row per image, distinct lights, no missing file,
+    the camera's size); the first round folder without any of its images is the one awaiting
+    captures. An acquisition of another problem in ``folder`` is refused."""
+
+    kind = "folder"
+
+    def __init__(self, folder: str | Path, problem: Problem) -> None:
+        self.folder = Path(folder)
+        _check_same_problem(self.folder, problem)
+        camera = Camera.from_spec(problem.camera, problem.object.center_m)
+        self.cameras: list[FolderCamera] = []
+        while True:
+            sub = self.folder / round_folder(len(self.cameras))
+            if not (sub / "captures.csv").is_file():
+                break
+            names, _ = read_captures_csv(sub / "captures.csv")
+            if not any((sub / name).is_file() for name in names):
+                break  # the round awaiting captures
+            self.cameras.append(FolderCamera(sub, camera, problem.light.saturation))
+
+    def camera(self, index: int) -> FolderCamera | None:
+        """The camera of round ``index``, None when its images are not there yet."""
+        return self.cameras[index] if index < len(self.cameras) else None
+
+
+def _check_same_problem(folder: Path, problem: Problem) -> None:
+    """Refuse to continue an acquisition ``folder`` begun with another problem definition."""
+    try:
+        document = json.loads((folder / "acquisition.json").read_text())
+    except (OSError, ValueError):
+        return  # nothing begun there
+    before = document.get("problem_definition") if isinstance(document, dict) else None
+    if before is not None and before != json.loads(json.dumps(json_safe(problem.to_dict()))):
+        raise UsageError(
+            "--out",
+            f"{folder} holds an acquisition of another problem definition ({document.get('problem')}): "
+            "continue it with the problem file as it was, or give a new folder",
+        )
+
+
+def make_camera(kind: str, setup: Setup, folder: str | Path | None = None) -> CaptureCamera | RoundFolders:
     """The camera of ``kind`` for ``setup``: the model or Mitsuba camera in the problem's ``[world]``,
-    or the folder camera on ``images`` (linear files: apply a response with :class:`FolderCamera`
-    directly)."""
+    or the folder camera of an acquisition in rounds in ``folder`` (:class:`RoundFolders`; a single
+    folder of images: :class:`FolderCamera` directly)."""
     if kind == "model":
         return ModelCamera(setup.scene, setup.problem.world)
     if kind == "mitsuba":
@@ -84,9 +176,9 @@ def make_camera(kind: str, setup: Setup, images: str | Path | None = None) -> Ca
 
         return MitsubaCamera(setup.scene, setup.problem.world, file=setup.file)
     if kind == "folder":
-        if images is None:
-            raise OptlightError("the folder camera needs the folder of the images (--images DIR)")
-        return FolderCamera(images, setup.scene.camera, setup.problem.light.saturation)
+        if folder is None:
+            raise OptlightError("the folder camera needs the acquisition folder (--out DIR)")
+        return RoundFolders(folder, setup.problem)
     raise OptlightError(f"unknown camera {kind!r} (one of {', '.join(CAMERAS)})")
 
 
@@ -110,6 +202,46 @@ def modelled_costs(model: Setup, positions: ArrayLike) -> Array:
     return np.array([model.objective.numpy(model.scene.pixels(a)) for a in np.asarray(positions, float)])
 
 
+#: What the loop judges a round by, per ``[lightset] kind`` (:func:`round_measure`); lower is better.
+MEASURES = {
+    "none": "measured cost",
+    "photometric_stereo": "photometric-stereo normal error (deg)",
+    "rti": "RTI covering radius (deg)",
+    "grid": "grid angular error (deg)",
+}
+
+
+def round_measure(setup: Setup, plan: Plan, captures: Sequence[Capture], calibration: Calibration | None) -> float:
+    """The measure of a round (:data:`MEASURES`, by ``[lightset] kind``; lower is better):
+
+    - no light set: the mean over the captures of the problem's objective on the recorded images;
+    - photometric_stereo: the mean over the object's pixels of the angle (deg) between the normal
+      photometric stereo recovers from the recorded images and the model's (G-buffer) normal, 90°
+      where it recovers none (fewer than three usable lights): the images linearised by the
+      ``calibration``'s response γ, its ambient image subtracted, its light power as the lights'
+      strength, the lights where the robot put them (directions from the object's centre, the
+      directional model; :func:`~optlight.photometric_stereo.recover_from_scene`);
+    - rti: the covering radius (deg) of the captured lights on the allowed cap (every point of the
+      cap within it of a light; :func:`~optlight.planning.lightsets.coverage`);
+    - grid: the largest angle (deg) between a grid direction and the light captured for it (the
+      plan's grid report: the captures are at the plan's lights)."""
+    spec = setup.problem.lightset
+    if spec.kind == "none":
+        return float(np.mean(measured_costs(setup, captures)))
+    if spec.kind == "grid":
+        return float((plan.lightset or {}).get("grid", {}).get("max_moved_deg", 0.0))
+    sphere = setup.sphere
+    d = np.array([c.light_position for c in captures]) - sphere.center
+    directions = (d / np.linalg.norm(d, axis=1, keepdims=True)) @ sphere.rotation  # sphere frame
+    if spec.kind == "rti":
+        return coverage(directions, Cap(sphere.zenith_min, sphere.zenith_max))["covering_radius_deg"]
+    scene = (setup if calibration is None else calibrated_setup(setup, calibration)).scene
+    images = np.stack([c.image for c in captures])  # linearised by the calibrated response
+    recovery = recover_from_scene(scene, directions, images, spec.dark_level, spec.saturation_level)
+    error = recovery.angular_error(gbuffer_normal_map(setup.scene))[scene.gbuffer.mask]
+    return float(np.mean(np.where(np.isnan(error), 90.0, error)))
+
+
 def improves(cost: float, kept: float, tolerance: float) -> bool:
     """A measured ``cost`` is an improvement on the ``kept`` one when it is at least ``tolerance``
     (relative) below it: the loop's stop rule and its choice of plan. A smaller decrease is within
@@ -121,8 +253,9 @@ def improves(cost: float, kept: float, tolerance: float) -> bool:
 class Iteration:
     """One round of the loop: the ``plan`` (made on the model of the previous round's calibration,
     the problem's model for round 0), its ``captures``, the ``measured`` and ``modelled`` cost of each
-    capture, the ``calibration`` fitted after it (None when it failed: ``calibration_error`` says why)
-    and the round's ``wall_time_s`` (plan, capture and calibration)."""
+    capture, the ``calibration`` fitted after it (None when it failed: ``calibration_error`` says why),
+    the round's ``wall_time_s`` (plan, capture and calibration) and its ``measure``
+    (:func:`round_measure`; None: the measured cost)."""
 
     index: int
     plan: Plan
@@ -132,6 +265,12 @@ class Iteration:
     calibration: Calibration | None
     wall_time_s: float
     calibration_error: str | None = None
+    measure: float | None = None
+
+    @property
+    def score(self) -> float:
+        """What the loop judges the round by: its ``measure`` (the measured cost when None)."""
+        return self.measured_cost if self.measure is None else self.measure
 
     @property
     def measured_cost(self) -> float:
@@ -151,6 +290,7 @@ class Iteration:
             "iteration": self.index,
             "measured_cost": self.measured_cost,
             "modelled_cost": self.modelled_cost,
+            "measure": self.score,
             "measured_per_capture": self.measured,
             "modelled_per_capture": self.modelled,
             "landmarks": [
@@ -183,15 +323,21 @@ class Acquisition:
     exposure: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def measure(self) -> str:
+        """The name of what the loop judges rounds by (:data:`MEASURES`)."""
+        return MEASURES[self.setup.problem.lightset.kind]
+
+    @property
     def best(self) -> Iteration:
-        """The round the loop keeps: the first, replaced by a later one only when its measured cost is
-        at least ``[loop] tolerance`` (relative) below the kept round's — the rule that stops the loop.
+        """The round the loop keeps: the first, replaced by a later one only when its measure
+        (:attr:`Iteration.score`) is at least ``[loop] tolerance`` (relative) below the kept round's —
+        the rule that stops the loop.
         A smaller decrease is within what the camera's noise makes: keeping such a round was measured
         worse than the open loop when captured again (bench_loop's light_2cm_off, ratio 1.00006)."""
         tolerance = self.setup.problem.loop.tolerance
         kept = self.iterations[0]
         for it in self.iterations[1:]:
-            if improves(it.measured_cost, kept.measured_cost, tolerance):
+            if improves(it.score, kept.score, tolerance):
                 kept = it
         return kept
 
@@ -206,13 +352,22 @@ class Acquisition:
         return next((it.calibration for it in reversed(self.iterations) if it.calibration is not None), None)
 
     def summary(self) -> dict[str, Any]:
-        """The key numbers, JSON-safe."""
-        best, first = self.best, self.open_loop
-        return {
+        """The key numbers, JSON-safe (no costs before the first round's captures)."""
+        head = {
             "problem": self.setup.problem.name,
             "camera": self.camera,
             "status": self.status,
             "iterations": len(self.iterations),
+        }
+        if not self.iterations:
+            return head
+        best, first = self.best, self.open_loop
+        return {
+            **head,
+            "measure": self.measure,
+            "open_loop_measure": first.score,
+            "best_measure": best.score,
+            "ratio_best_over_open_loop_measure": best.score / first.score if first.score > 0 else None,
             "best_iteration": best.index,
             "open_loop_measured_cost": first.measured_cost,
             "best_measured_cost": best.measured_cost,
@@ -221,6 +376,74 @@ class Acquisition:
             else None,
             "wall_time_per_iteration_s": [it.wall_time_s for it in self.iterations],
         }
+
+    def instructions(self, folder: str | Path, command: str) -> str:
+        """What the user does next, in plain text: with a round awaiting captures, where the robot's
+        files are, which images to save where, and ``command`` (the one that continues); else where
+        the dataset is."""
+        out = Path(folder)
+        if self.next_plan is None:
+            return f"{self.status}: the dataset is in {out}/ (README.md says what each file holds)"
+        index, plan = len(self.iterations), self.next_plan
+        sub = out / round_folder(index)
+        names = image_names(round_pattern(index), len(plan.visited))
+        camera = plan.scene.camera
+        limit = self.setup.problem.loop.iterations
+        what = "the open loop's plan, on the problem's model" if index == 0 else "re-planned on the calibrated model"
+        return "\n".join(
+            [
+                f"round {index} ({what}; at most {limit} rounds, 0 to {limit - 1}): the files for the robot and "
+                f"the camera are in {sub}/",
+                f"  1. move the robot to the first point of {sub / 'joint_trajectory.yaml'} (a ROS 2 "
+                "JointTrajectory; trajectory.csv holds the same motion sampled in time) and run it",
+                f"  2. trigger the camera at each trigger_s of {sub / 'captures.csv'} (seconds from the start "
+                f"of the motion; the light rests there from dwell_start_s to dwell_end_s): {len(names)} images",
+                f"  3. save each image under the name in the image column of its row ({names[0]} … {names[-1]}) "
+                f"in {sub}/: PNG or TIFF, {camera.width}×{camera.height} px, with the camera's settings "
+                "(exposure, gain, response) those of every other round",
+                "then run the same command again; it continues from there:",
+                f"  {command}",
+            ]
+        )
+
+    def readme(self) -> str:
+        """The dataset folder's README.md: what each file holds and the frame of every direction."""
+        rounds = self.camera == "folder"
+        best = f"round {self.best.index}" if self.iterations else "none yet"
+        per_round = (
+            "- `round_NN/`: round NN's plan (what `optlight solve` writes: trajectory.csv, "
+            "joint_trajectory.yaml, captures.csv with the trigger times, lights.lp, plan.json, report.md) "
+            "and the images saved there for it, named `rNN_000.png` …"
+            if rounds
+            else "- `iterations/NN/`: round NN's images, captures.csv and lights.lp"
+        )
+        lines = [
+            f"# {self.setup.problem.name}: camera in the loop ({self.camera} camera)",
+            "",
+            f"Status: {self.status}. The best round (lowest {self.measure}): {best}.",
+            "",
+            "## Files",
+            "",
+            "- `captures.csv`, `lights.lp` and the images they name: the best round's captures, 16-bit "
+            "greyscale PNG of the recorded values (0 is black, 65535 the saturation value; the camera's "
+            "response is calibration.json's `gamma`), the same names in both files",
+            per_round,
+            "- `calibration.json`, `albedo_factor.npy` (H, W), `normals.npy` (H, W, 3, world frame; zeros "
+            "where not recovered): the calibrated model",
+            "- `acquisition.json`: per round the measured and modelled cost, the lights, the calibration",
+            "- `measured_cost.png`: the measured and modelled cost per round",
+            "",
+            "## Frames",
+            "",
+            f"- Light directions (captures.csv's `{'`, `'.join(LIGHT_DIRECTION_COLUMNS)}`, lights.lp, a "
+            f"DiLiGenT folder's light_directions.txt): {LIGHT_FRAME}.",
+            "- `zenith_deg`, `azimuth_deg` (captures.csv, acquisition.json): the light on the light sphere "
+            "around the object, zenith from the direction towards the camera, azimuth 0 to the right of "
+            "the image and 90 towards its top: the angles `optlight render --zenith --azimuth` takes.",
+            "- Light positions (`light_position_*_m`) and normals.npy: the problem's world frame, metres.",
+            "",
+        ]
+        return "\n".join(lines)
 
     def figure(self) -> Figure:
         """Measured and modelled cost per iteration."""
@@ -257,18 +480,37 @@ class Acquisition:
         - ``acquisition.json``: per round the measured and modelled cost, the landmarks, the wall time
           and the calibration; the summary; library versions;
         - ``measured_cost.png``: :meth:`figure`;
-        - ``next/``: with a folder camera awaiting captures, the next plan's results folder.
+        - ``README.md``: the files and the frame of their light directions;
+        - with the folder camera, ``round_NN/`` instead of ``iterations/NN/``: each round's plan folder
+          (:meth:`Plan.save <optlight.plan.Plan.save>` without the preview), the round awaiting
+          captures last; the images the user saved there are never written (module docstring).
+
+        With the folder camera an acquisition in rounds (:data:`ROUNDS`) in ``folder`` is continued
+        without ``overwrite``; until the loop has ended, the folder's manifest says it may be.
         """
+        rounds = self.camera == "folder"
         return write_folder(
-            folder, lambda staging: [staging / f for f in self._write(staging)], overwrite=overwrite
+            folder,
+            lambda staging: [staging / f for f in self._write(staging)],
+            overwrite=overwrite,
+            resume=ROUNDS if rounds else None,
+            resumable=ROUNDS if rounds and self.status == AWAITING else None,
         )
 
     def _write(self, root: Path) -> list[str]:
         files: list[str] = []
-        for it in self.iterations:
-            sub = Path("iterations") / f"{it.index:02d}"
-            files += [str(sub / f) for f in _write_captures_folder(root / sub, it)]
-        files += _write_captures_folder(root, self.best)
+        if self.camera == "folder":
+            plans = [it.plan for it in self.iterations] + ([self.next_plan] if self.next_plan else [])
+            for index, plan in enumerate(plans):
+                written = plan.save(root / round_folder(index), preview=False)
+                # a round folder carries its own manifest (a results folder of its own); the dataset's lists it too
+                files += [str(Path(p).relative_to(root)) for p in written] + [f"{round_folder(index)}/{MANIFEST}"]
+        else:
+            for it in self.iterations:
+                sub = Path("iterations") / f"{it.index:02d}"
+                files += [str(sub / f) for f in _write_captures_folder(root / sub, it)]
+        if self.iterations:
+            files += _write_captures_folder(root, self.best)
         calibration = self.calibration
         if calibration is not None:
             scene = self.setup.scene
@@ -286,14 +528,14 @@ class Acquisition:
                 normals[scene.gbuffer.pixel_index[valid]] = calibration.normals[valid]
                 np.save(root / "normals.npy", normals.reshape(h, w, 3))
                 files.append("normals.npy")
-        if self.next_plan is not None:
-            written = self.next_plan.save(root / "next", preview=False)
-            # next/ carries its own manifest (a results folder of its own); the dataset's lists it too
-            files += [str(Path(p).relative_to(root)) for p in written] + [f"next/{MANIFEST}"]
-        self.figure().savefig(root / "measured_cost.png", dpi=120)
-        files.append("measured_cost.png")
+        if self.iterations:
+            self.figure().savefig(root / "measured_cost.png", dpi=120)
+            files.append("measured_cost.png")
+        (root / "README.md").write_text(self.readme())
+        files.append("README.md")
         document = {
             **self.summary(),
+            "problem_definition": self.setup.problem.to_dict(),
             "exposure": self.exposure,
             "loop": self.setup.problem.to_dict().get("loop", {}),
             "world": self.setup.problem.to_dict().get("world", {}),
@@ -325,6 +567,7 @@ def _write_captures_folder(folder: Path, iteration: Iteration) -> list[str]:
         image_pattern=spec.image_pattern,
         light_directions_camera=directions,
         light_positions=positions,
+        light_angles_deg=np.rad2deg(np.column_stack(plan.setup.sphere.angles(positions))),
         joint_names=plan.robot.joint_names,
     )
     names = [spec.image_pattern.format(index=i) for i in range(len(iteration.captures))]
@@ -336,20 +579,26 @@ def _write_captures_folder(folder: Path, iteration: Iteration) -> list[str]:
 
 def acquire(
     problem: Problem | Setup | str | Path,
-    camera: CaptureCamera | str = "model",
+    camera: CaptureCamera | RoundFolders | str = "model",
     *,
-    images: str | Path | None = None,
+    folder: str | Path | None = None,
     progress: LoopProgress | None = None,
 ) -> Acquisition:
     """Run the camera in the loop on ``problem`` (module docstring) with ``camera`` (a
-    :class:`~optlight.capture.CaptureCamera` or one of :data:`CAMERAS`; ``images`` for "folder").
+    :class:`~optlight.capture.CaptureCamera`, :class:`RoundFolders` or one of :data:`CAMERAS`;
+    ``folder``, the acquisition folder, for "folder").
+
+    With the folder camera each plan names its images for its round (:func:`round_pattern`), and the
+    loop stops with status :data:`AWAITING` at the first round whose images are not there, that
+    round's plan the ``next_plan``.
 
     Raises :class:`VerificationError` when the first plan fails verification (the robot never runs
     it; a re-plan that fails ends the loop, like one that fails to solve, and the best plan so far
-    stands), and what :func:`optlight.solve` and the cameras raise."""
+    stands), :class:`OptlightError` when a round's images were taken for another plan than the one
+    planned again for it, and what :func:`optlight.solve` and the cameras raise."""
     notify: LoopProgress = progress or (lambda it, stage, done, total: None)
     setup = problem if isinstance(problem, Setup) else Setup.from_problem(problem)
-    device = make_camera(camera, setup, images) if isinstance(camera, str) else camera
+    device = make_camera(camera, setup, folder) if isinstance(camera, str) else camera
     spec = setup.problem.loop
     model = setup
     pool: list[Capture] = []
@@ -358,7 +607,7 @@ def acquire(
     for i in range(spec.iterations):
         start = time.perf_counter()
         try:
-            plan = solve(model, progress=_stage_progress(notify, i))
+            plan = solve(round_setup(model, i) if device.kind == "folder" else model, progress=_stage_progress(notify, i))
         except OptlightError as e:
             if i == 0:
                 raise
@@ -375,12 +624,21 @@ def acquire(
             status = f"re-plan failed verification ({failed}); the robot does not run it"
             break
         notify(i, "capture", 0, len(plan.visited))
+        current = device.camera(i) if isinstance(device, RoundFolders) else device
+        if current is None:
+            status, next_plan = AWAITING, plan
+            break
         try:
-            captures = execute(plan, device)
-        except MissingCaptureError:
+            captures = execute(plan, current)
+        except MissingCaptureError as e:
+            if isinstance(device, RoundFolders):
+                raise OptlightError(
+                    f"{e}: round {i}'s images were taken for another plan than the one planned again for it "
+                    "(the problem file, or an earlier round's images, changed since)"
+                ) from None
             if i == 0:
                 raise
-            status, next_plan = "awaiting captures", plan
+            status, next_plan = AWAITING, plan
             break
         notify(i, "capture", len(captures), len(captures))
         measured = measured_costs(setup, captures)
@@ -393,12 +651,21 @@ def acquire(
         except OptlightError as e:
             error = str(e)
         notify(i, "calibrate", 1, 1)
+        measure = None if setup.problem.lightset.kind == "none" else round_measure(setup, plan, captures, calibration)
         rounds.append(
             Iteration(
-                i, plan, tuple(captures), measured, modelled, calibration, time.perf_counter() - start, error
+                i,
+                plan,
+                tuple(captures),
+                measured,
+                modelled,
+                calibration,
+                time.perf_counter() - start,
+                error,
+                measure,
             )
         )
-        cost = float(np.mean(measured))
+        cost = rounds[-1].score
         if i > 0 and not improves(cost, best, spec.tolerance):
             status = "stopped improving"
             break

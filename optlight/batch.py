@@ -15,9 +15,10 @@ as dotted problem-file keys (``robot.base_position_m``, ``object.kind``, ``landm
     label = "close"              # optional: names the row's folder
     "robot.base_position_m" = [0.1, 0.0, 0.0]
 
-The spec is checked whole before any work starts: every row's problem is built and validated like a
-problem file, and a mistake is a :class:`~optlight.errors.ProblemError` naming the batch file and the
-key (``grid.robot.name[1]``, ``rows[2].landmarks.count``).
+The spec is checked whole before any work starts: the rows are counted (at most :data:`MAX_ROWS`),
+then every row's problem is built and validated like a problem file, and a mistake is a
+:class:`~optlight.errors.ProblemError` naming the batch file and the key (``grid.robot.name[1]``,
+``rows[2].landmarks.count``).
 
 Each row is one task, ``optlight.solve(problem)`` then ``plan.save(folder)`` on a worker
 (:func:`solve_row`), into ``OUT/plans/<row>/``: the workers of a local cluster write there
@@ -72,21 +73,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from optlight import interrupts
+from optlight import interrupts, locks
 from optlight.errors import OptlightError, ProblemError, UsageError
-from optlight.export import MANIFEST, STAGING_PREFIX, check_output_folder, write_folder
+from optlight.export import MANIFEST, STAGING_PREFIX, check_output_folder, write_folder, writes_into
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
-from optlight.threads import usable_cores
+from optlight.threads import WORKERS_PER_CORE, max_local_workers, usable_cores
 
 if TYPE_CHECKING:
     from distributed import Client
 
 #: Top-level keys of a batch spec.
 SPEC_KEYS = ("description", "problem", "preview", "grid", "rows")
+#: Most rows of one batch: each row's problem is built and checked before the batch starts (~ms each),
+#: and each row is a folder of results; split a larger study into several batches.
+MAX_ROWS = 10_000
 #: Seconds to wait for a remote scheduler before giving up.
 CONNECT_TIMEOUT_S = 10.0
+#: The part of :data:`CONNECT_TIMEOUT_S` spent trying to connect, before the scheduler must answer.
+CONNECT_SHARE = 0.8
 #: The numbers of a solve copied into the results table: record key -> Plan.summary() key.
 METRICS = {
     "landmarks": "landmarks",
@@ -101,6 +107,8 @@ PLANS = "plans"
 RECORDS = "records"
 #: Written first into a batch's output folder: marks it as a batch's, which a later run resumes.
 BATCH_MARKER = ".optlight-batch.json"
+#: What a batch keeps when the system refuses one of its writes.
+RESUME = "the rows finished so far are kept: run the batch again to resume"
 
 
 class SchedulerError(OptlightError):
@@ -170,6 +178,16 @@ def batch_spec_from_dict(data: Mapping[str, Any], source: Path | None = None) ->
     listed = data.get("rows", [{}])
     if not isinstance(listed, list) or not listed or not all(isinstance(r, dict) for r in listed):
         raise ProblemError(file, "rows", "a non-empty array of tables ([[rows]])", listed)
+    count = len(listed) * math.prod(len(v) for v in axes.values())
+    if count > MAX_ROWS:  # counted before any row's problem is built
+        lengths = " × ".join(f"{len(v)} ({k})" for k, v in axes.items())
+        raise ProblemError(
+            file,
+            "grid" if axes else "rows",
+            f"at most {MAX_ROWS} rows, the grid's list lengths multiplied and times the [[rows]] "
+            f"({lengths or 'no grid'} × {len(listed)} rows)",
+            count,
+        )
 
     rows: list[BatchRow] = []
     seen: dict[str, str] = {}
@@ -450,10 +468,11 @@ def store_row(out: Path, row: BatchRow, outcome: Mapping[str, Any]) -> RowRecord
         solve_s=float(outcome.get("solve_s", math.nan)),
     )
     path = _record_path(out, row.id)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(json.dumps(record.to_dict(), indent=1) + "\n")
-    tmp.replace(path)
+    with writes_into(out, RESUME):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.tmp")
+        tmp.write_text(json.dumps(record.to_dict(), indent=1) + "\n")
+        tmp.replace(path)
     return record
 
 
@@ -487,7 +506,7 @@ def write_table(out: Path, records: Sequence[RowRecord], keys: Sequence[str]) ->
     """``results.csv`` and ``results.md`` in ``out``: one line per row (:func:`table_rows`)."""
     rows = table_rows(records, keys)
     csv_path, md_path = out / "results.csv", out / "results.md"
-    with csv_path.open("w", newline="") as f:
+    with writes_into(out, RESUME), csv_path.open("w", newline="") as f:
         csv.writer(f).writerows(rows)
 
     def line(cells: Sequence[str]) -> str:
@@ -497,7 +516,8 @@ def write_table(out: Path, records: Sequence[RowRecord], keys: Sequence[str]) ->
     md = [f"# Batch results: {ok} of {len(records)} rows solved", "", line(rows[0])]
     md.append("|" + "---|" * len(rows[0]))
     md += [line(cells) for cells in rows[1:]]
-    md_path.write_text("\n".join(md) + "\n")
+    with writes_into(out, RESUME):
+        md_path.write_text("\n".join(md) + "\n")
     return csv_path, md_path
 
 
@@ -511,6 +531,50 @@ def default_workers() -> int:
     return usable_cores()
 
 
+def check_scheduler(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """Ask the server at ``address`` who it is (Dask's handshake, then its ``identity``) within
+    ``timeout_s`` seconds in all; :class:`SchedulerError` unless a Dask scheduler answers.
+
+    Dask's client waits for the handshake's answer without a time limit (a server that accepts and
+    says nothing holds it for ever) and reads the first 8 bytes any other server sends as a message
+    length (an allocation of exabytes). The question is asked from a thread of its own, in an event
+    loop of its own, so that it also works where the caller runs one (a notebook)."""
+    import asyncio
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect
+
+    async def identity() -> object:
+        # connection attempts give up (OSError) before the whole question does: a server that takes
+        # the connection and then says nothing is told apart from one that refuses it
+        comm = await connect(address, timeout=CONNECT_SHARE * timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def ask() -> object:
+        return asyncio.run(asyncio.wait_for(identity(), timeout_s))
+
+    unreachable = (
+        f"cannot reach the Dask scheduler at {address!r} within {timeout_s:g} s ({{}}); start one with "
+        "`dask scheduler` and its workers with `dask worker ADDRESS`, or leave --scheduler out for a local cluster"
+    )
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            reply = pool.submit(ask).result()
+        except TimeoutError:
+            raise SchedulerError(f"no answer from {address} within {timeout_s:g} s: not a Dask scheduler") from None
+        except (OSError, ValueError, TypeError) as e:
+            raise SchedulerError(unreachable.format(" ".join(str(e).split()) or type(e).__name__)) from None
+        except Exception:  # what it sent is not Dask's protocol (a MemoryError: garbage read as a length)
+            raise SchedulerError(f"{address} is not a Dask scheduler (what it sent is not Dask's protocol)") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        kind = reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+        raise SchedulerError(f"{address} is not a Dask scheduler (it says it is a {kind})")
+
+
 @contextmanager
 def dask_client(
     scheduler: str | None = None, workers: int | None = None, *, timeout_s: float | None = None
@@ -518,8 +582,9 @@ def dask_client(
     """A Dask client: of the remote scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or of a
     :class:`~distributed.LocalCluster` of ``workers`` single-threaded processes (default: one per
     core) on 127.0.0.1 with no dashboard. The client and the local cluster are closed on exit, whatever
-    happens. An unreachable scheduler is a :class:`SchedulerError` after ``timeout_s`` seconds
-    (default :data:`CONNECT_TIMEOUT_S`)."""
+    happens. An unreachable scheduler, a server that is not a Dask scheduler and one that does not
+    answer are a :class:`SchedulerError` within ``timeout_s`` seconds (default
+    :data:`CONNECT_TIMEOUT_S`; :func:`check_scheduler`)."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -534,8 +599,11 @@ def dask_client(
     try:
         if scheduler is None:
             n = workers if workers is not None else default_workers()
-            if n < 1:
-                raise OptlightError(f"a local cluster needs at least 1 worker, got {n}")
+            if not 1 <= n <= max_local_workers():
+                raise OptlightError(
+                    f"a local cluster has 1 to {max_local_workers()} workers ({WORKERS_PER_CORE} per "
+                    f"usable core of this machine), got {n}"
+                )
             cluster = LocalCluster(
                 n_workers=n,
                 threads_per_worker=1,  # IPOPT and the renderer hold the GIL: parallel means processes
@@ -554,6 +622,7 @@ def dask_client(
             interrupts.reached("cluster-started")
             client = Client(cluster)
         else:
+            check_scheduler(scheduler, timeout_s)
             try:
                 client = Client(scheduler, timeout=timeout_s)
             except (OSError, TimeoutError, ValueError, TypeError) as e:
@@ -643,11 +712,12 @@ def run_batch(
     resume = check_batch_folder(out)
     spec = spec if isinstance(spec, BatchSpec) else load_batch_spec(spec)
     interrupts.reached("spec-checked")
-    out.mkdir(parents=True, exist_ok=True)
-    if not resume:
-        (out / BATCH_MARKER).write_text(
-            json.dumps({"written_by": "optlight batch", "spec": json_safe(spec.source)}, indent=1) + "\n"
-        )
+    with writes_into(out, RESUME):
+        out.mkdir(parents=True, exist_ok=True)
+        if not resume:
+            (out / BATCH_MARKER).write_text(
+                json.dumps({"written_by": "optlight batch", "spec": json_safe(spec.source)}, indent=1) + "\n"
+            )
     start = time.perf_counter()
     records: list[RowRecord | None] = [done_record(out, row) for row in spec.rows]
     todo = [i for i, r in enumerate(records) if r is None]
@@ -703,7 +773,9 @@ def no_staging_left(out: Path, *, local: bool) -> Iterator[None]:
 def check_batch_folder(out: Path, option: str = "out") -> bool:
     """Whether ``out`` holds an earlier batch (its :data:`BATCH_MARKER`), which a run resumes; else it
     must be a new or empty folder (:func:`optlight.export.check_output_folder`): optlight never writes
-    among files it did not write. Raises :class:`UsageError` (``option`` names the folder) otherwise."""
+    among files it did not write. Raises :class:`UsageError` (``option`` names the folder) otherwise,
+    and :class:`~optlight.errors.OutputError` when another run is writing it (:mod:`optlight.locks`)."""
+    locks.claim(out)
     if (out / BATCH_MARKER).is_file():
         return True
     if out.is_dir() and any(out.iterdir()):

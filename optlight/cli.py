@@ -24,6 +24,7 @@ import importlib
 import logging
 import math
 import os
+import shlex
 import signal
 import sys
 import warnings
@@ -33,16 +34,18 @@ from typing import NoReturn
 
 import numpy as np
 
-from optlight import interrupts
+from optlight import interrupts, locks
 from optlight.errors import OptlightError, UsageError, VerificationError
-from optlight.spec import available_problems, load_problem, resolve_problem_path
+from optlight.spec import Problem, available_problems, load_problem, resolve_problem_path
+from optlight.threads import WORKERS_PER_CORE, max_local_workers
 
 #: What ``--force`` allows, as the output policy's errors say it.
 FORCE = "--force"
 #: Smallest grid step of ``optlight reach`` (degrees): finer grids mean millions of IK solves.
 MIN_STEP_DEG = 0.1
-#: Most worker processes of a local cluster (``batch``, ``cell``).
-MAX_WORKERS = 1024
+#: Most cells of an ``optlight reach`` grid: one generalized IK solve (and a clear-posture search)
+#: each, a few milliseconds to a second when the cell is out of reach.
+MAX_REACH_CELLS = 20_000
 #: What each command imports, up front and with Ctrl-C deferred: an interrupt in the middle of an
 #: import can break a library for the rest of the run (trimesh catches it while importing an optional
 #: part and leaves an error wrapper where a class should be).
@@ -54,10 +57,11 @@ MODULES = {
     "batch": ("optlight.batch", "rich.progress"),
     "cell": ("optlight.cell", "optlight.export", "rich.progress"),
     "solve": ("optlight.export", "optlight.viz.drawing", "rich.progress", "rich.table"),
+    "simulate": ("optlight.export", "optlight.simulation"),
 }
 #: What ``solve`` imports once its figure worker has started: the worker's own imports (~0.8 s of a
 #: core) then overlap these and the problem's build, which leave a core idle, instead of taking
-#: one from the landmark search (0.5 → 0.9 s on the default problem when they did).
+#: one from the landmark search (which they would slow by ~80 % on the default problem).
 SOLVE_MODULES = ("optlight.preflight", "optlight.pipeline", "optlight.report", "optlight.viz.preview")
 
 
@@ -81,11 +85,11 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_render(args: argparse.Namespace) -> int:
     from optlight.export import check_output_file, write_file
     from optlight.scene import Scene
-    from optlight.viz.images import save_gray_png
+    from optlight.viz.images import save_gray_png, written_by_optlight
 
     if Path(args.out).suffix.lower() != ".png":
         raise UsageError("--out", f"{args.out}: expected a .png file name")
-    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)
+    check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE, ours=written_by_optlight)
     problem = load_problem(args.problem)
     scene = Scene.from_problem(problem)  # all a render needs (and the check of the object and camera)
     position = scene.sphere.position(np.deg2rad(args.zenith), np.deg2rad(args.azimuth))
@@ -96,6 +100,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
         overwrite=args.force,
         option="--out",
         force=FORCE,
+        ours=written_by_optlight,
     )
     print(f"wrote {path} (zenith {args.zenith:g}°, azimuth {args.azimuth:g}°)")
     return 0
@@ -122,6 +127,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         _import(SOLVE_MODULES)
         from optlight.pipeline import STAGES, solve
         from optlight.preflight import preflight
+        from optlight.report import FigureDrafts
 
         with console.status("building the scene, objectives, robot and environment"):
             setup = preflight(problem)  # built once: the solve below takes it as it is
@@ -143,8 +149,9 @@ def _cmd_solve(args: argparse.Namespace) -> int:
                 bars.start_task(tasks[stage])
                 bars.update(tasks[stage], completed=done, total=total)
 
+            drafts = FigureDrafts(worker)  # the figures drawn as the stages finish
             with warnings.catch_warnings(record=True):
-                plan = solve(setup, progress=progress, worker=worker)
+                plan = solve(setup, progress=progress, on_stage=drafts)
         interrupts.check()
         table = Table(title=f"optlight solve {problem.name}", show_header=False)
         for key, value in _summary_rows(plan.summary()):
@@ -156,7 +163,8 @@ def _cmd_solve(args: argparse.Namespace) -> int:
         if not plan.verification.passed:
             console.print(escape(plan.verification.summary()))
         with console.status(f"writing {out}/ (figures, preview, report)"):
-            plan.save(out, overwrite=args.force, worker=worker)  # refused (VerificationError) unless verified
+            # refused (VerificationError) unless verified
+            plan.save(out, overwrite=args.force, worker=worker, drawn=drafts.figures)
     console.print(f"results: {out}/  (report: {out / 'report.md'}, preview: {out / 'preview.html'})")
     if args.view:
         plan.preview().show()
@@ -164,6 +172,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
 
 def _summary_rows(s: dict) -> list[tuple[str, str]]:
+    bound = s["motion_bound"]
     return [
         ("robot", s["robot"]),
         ("landmarks", str(s["landmarks"])),
@@ -176,24 +185,37 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
             f"{s['joint_path_length_rad']:.3f} / {s['knot_ik_path_length_rad']:.3f} rad",
         ),
         ("duration", f"{s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving)"),
+        (
+            "moving / rest-to-rest bound",
+            f"{bound['motion_time_s']:.2f} / {bound['rest_to_rest_s']:.2f} s ({bound['ratio']:.2f}×)",
+        ),
+        ("peak torque / limit", _torque_cell(s["torque_peak_fraction"])),
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),
     ]
+
+
+def _torque_cell(fractions: dict[str, float] | None) -> str:
+    """The joint nearest its torque limit and how near, or that the robot publishes no limits."""
+    if not fractions:
+        return "not checked (no published limits)"
+    joint = max(fractions, key=lambda j: fractions[j])
+    return f"{fractions[joint]:.0%} ({joint})"
 
 
 def _cmd_acquire(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.markup import escape
 
-    from optlight.acquisition import acquire
+    from optlight.acquisition import ROUNDS, RoundFolders, acquire
     from optlight.export import check_output_folder
     from optlight.preflight import preflight
 
-    if args.camera == "folder" and args.images is None:
-        raise UsageError("--images", "the folder camera (--camera folder) needs the folder of the captured images")
     out = Path(args.out)
-    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE)
+    in_rounds = args.camera == "folder"  # a real camera: one run per round, continued in --out
+    check_output_folder(out, overwrite=args.force, option="--out", force=FORCE, resume=ROUNDS if in_rounds else None)
     problem = load_problem(args.problem)
+    rounds = RoundFolders(out, problem) if in_rounds else None  # the rounds' images checked before any work
     console = Console()  # stdout: stderr carries only the one-line error of a failed run
     with console.status("building the scene, objectives, robot and environment"):
         setup = preflight(problem)  # built once: the loop's first plan uses it as it is
@@ -204,12 +226,13 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             status.update(f"iteration {iteration}: {stage} {done}/{total}")
 
         with warnings.catch_warnings(record=True):
-            acquisition = acquire(setup, args.camera, images=args.images, progress=progress)
+            acquisition = acquire(setup, rounds or args.camera, progress=progress)
     interrupts.check()
     for it in acquisition.iterations:
+        measure = "" if it.measure is None else f", {acquisition.measure} {it.measure:.4g}"
         console.print(
-            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}, "
-            f"{it.wall_time_s:.1f} s"
+            f"iteration {it.index}: measured cost {it.measured_cost:.4g}, modelled {it.modelled_cost:.4g}"
+            f"{measure}, {it.wall_time_s:.1f} s"
         )
     calibration = acquisition.calibration
     if calibration is not None:
@@ -217,14 +240,19 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"calibrated model: {calibration.light_model} light, power {calibration.power:.3g}, ambient "
             f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
         )
-    best = acquisition.best
-    console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
-        f"{escape(acquisition.status)}; best: iteration {best.index}, measured cost {best.measured_cost:.4g} "
-        f"({best.measured_cost / max(acquisition.open_loop.measured_cost, 1e-300):.2f} × the open loop's)"
-    )
+    if acquisition.iterations:
+        best = acquisition.best
+        console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup
+            f"{escape(acquisition.status)}; best by the {acquisition.measure}: iteration {best.index}, "
+            f"{best.score:.4g} ({best.score / max(acquisition.open_loop.score, 1e-300):.2f} × the open loop's)"
+        )
     with console.status(f"writing {out}/"):
         acquisition.save(out, overwrite=args.force)
-    console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
+    if in_rounds:  # plain text, not wrapped: the user's instructions, with the command to paste
+        command = shlex.join(["optlight", "acquire", args.problem, "--camera", "folder", "--out", args.out])
+        print(acquisition.instructions(out, command))
+    else:
+        console.print(f"dataset: {out}/  (acquisition.json, captures.csv, lights.lp, measured_cost.png)")
     return 0
 
 
@@ -235,6 +263,7 @@ def _cmd_reach(args: argparse.Namespace) -> int:
 
     check_output_folder(args.out, overwrite=args.force, option="--out", force=FORCE)
     problem = load_problem(args.problem)
+    _check_reach_grid(problem, args.zenith_step, args.azimuth_step)
     setup = preflight(problem)
     result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     interrupts.check()
@@ -246,6 +275,24 @@ def _cmd_reach(args: argparse.Namespace) -> int:
         print(f"{100 * result.taken_fraction:.1f}% of it taken by the environment (collision or view)")
     print(f"wrote {png} and {js}")
     return 0
+
+
+def _check_reach_grid(problem: Problem, zenith_step: float, azimuth_step: float) -> None:
+    """Refuse a reachability grid of more than :data:`MAX_REACH_CELLS` cells (as
+    :func:`optlight.planning.reach.reachability_map` lays it over the cap), naming the smallest zenith
+    step that fits with this azimuth step."""
+    span = problem.light_sphere.zenith_max_deg - problem.light_sphere.zenith_min_deg
+    n_z = math.ceil(span / zenith_step - 1e-9) + 1
+    n_a = math.ceil(360.0 / azimuth_step - 1e-9)
+    if n_z * n_a <= MAX_REACH_CELLS:
+        return
+    rows = MAX_REACH_CELLS // n_a
+    fits = f"--zenith-step ≥ {span / (rows - 1):.3g} with this azimuth step" if rows >= 2 else "a larger --azimuth-step"
+    raise UsageError(
+        "--zenith-step",
+        f"a grid of at most {MAX_REACH_CELLS} cells (an IK solve each): {n_z} zenith × {n_a} azimuth cells "
+        f"over the cap's {span:g}° = {n_z * n_a}; give {fits}",
+    )
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
@@ -270,6 +317,25 @@ def _cmd_cell(args: argparse.Namespace) -> int:
     result = design_cell(args.spec, args.out, scheduler=args.scheduler, workers=args.workers, overwrite=args.force)
     for line in result.summary_lines():
         print(line)
+    return 0
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    import json
+
+    from optlight.export import check_output_file, write_file
+    from optlight.simulation import simulate_folder
+
+    if args.out is not None:
+        check_output_file(args.out, overwrite=args.force, option="--out", force=FORCE)  # before any work
+    report = simulate_folder(args.results)
+    interrupts.check()
+    for line in report.lines():
+        print(line)
+    if args.out is not None:
+        text = json.dumps(report.to_dict(), indent=2, allow_nan=False) + "\n"
+        out = write_file(args.out, lambda path: path.write_text(text), overwrite=args.force, option="--out", force=FORCE)
+        print(f"wrote {out}")
     return 0
 
 
@@ -363,9 +429,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p = add("acquire", _cmd_acquire, "camera in the loop: plan, capture, calibrate, re-plan; write the dataset")
     p.add_argument("problem", help="problem file path or built-in name")
-    p.add_argument("--camera", choices=("model", "mitsuba", "folder"), default="model", help="what captures")
-    p.add_argument("--images", help="folder with captures.csv and the images (--camera folder)")
-    p.add_argument("--out", required=True, help="dataset folder, new or empty")
+    p.add_argument(
+        "--camera",
+        choices=("model", "mitsuba", "folder"),
+        default="model",
+        help="what captures: the model or Mitsuba camera, or a real one (folder: one run per round, see --out)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        help="dataset folder, new or empty; with --camera folder also where each round's images go, and "
+        "the same command continues an acquisition there",
+    )
     p.add_argument("--force", action="store_true", help=force_help)
     p = add("reach", _cmd_reach, "map where on the light sphere the robot can put the light")
     p.add_argument("problem", help="problem file path or built-in name")
@@ -400,7 +475,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="light azimuth, degrees (90 = from above)",
     )
     p.add_argument("--out", required=True, help="output PNG file (not an existing one unless --force)")
-    p.add_argument("--force", action="store_true", help="replace an existing PNG file")
+    p.add_argument("--force", action="store_true", help="replace a PNG that optlight rendered there")
     p = add("batch", _cmd_batch, "solve a batch of problems on a Dask cluster (exit status 1 if a row failed)")
     p.add_argument("spec", help="batch spec file (TOML): a base problem and a grid or list of overrides")
     p.add_argument(
@@ -416,6 +491,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--force", action="store_true", help=force_help)
     _add_engine_arguments(p)
+    p = add(
+        "simulate",
+        _cmd_simulate,
+        "run a results folder's joint trajectory in MuJoCo (optlight[sim]): tracking, light at the triggers, torques",
+    )
+    p.add_argument("results", metavar="RESULTS_DIR", help="a results folder of optlight solve")
+    p.add_argument("--out", help="also write the numbers to this JSON file (not an existing one unless --force)")
+    p.add_argument("--force", action="store_true", help="replace an existing JSON file")
     add("problems", _cmd_problems, "list the built-in problems")
     p = add("bench", _cmd_bench, "run the benchmarks, print the table, write benchmarks/results/latest.*")
     p.add_argument("names", nargs="*", metavar="PROBLEM", help="problem or component benchmark; default: all")
@@ -430,9 +513,9 @@ def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--workers",
-        type=integer(1, MAX_WORKERS, "worker processes"),
+        type=integer(1, max_local_workers(), f"worker processes ({WORKERS_PER_CORE} per usable core here)"),
         metavar="N",
-        help="local cluster worker processes (default: one per core)",
+        help=f"local cluster worker processes (default: one per core; at most {WORKERS_PER_CORE} per core)",
     )
 
 
@@ -473,7 +556,8 @@ def _run(argv: Sequence[str] | None) -> int:
     try:
         args = build_parser().parse_args(argv)
         _import(MODULES.get(args.command, ()))
-        return int(args.func(args))
+        with locks.holding():  # the outputs the command checks stay locked until it ends
+            return int(args.func(args))
     except OptlightError as e:
         if interrupts.pending():  # it came of a signal IPOPT swallowed (a failed NLP): the signal wins
             return _interrupted()

@@ -1,8 +1,9 @@
-"""Exports for photometric-stereo tools: the DiLiGenT layout and recovered normals (DESIGN §7, §10).
+"""Exports for photometric-stereo tools: the DiLiGenT layout and recovered normals (docs/design.md §10, §12).
 
 DiLiGenT layout (one folder per object):
 
-- ``filenames.txt``: one image file name per line, in capture order (``001.png`` …);
+- ``filenames.txt``: one image file name per line, in capture order (the names of the plan's
+  captures.csv and lights.lp, ``[trajectory] image_pattern``);
 - ``light_directions.txt``: N rows ``x y z``, unit vectors from the object towards the light;
 - ``light_intensities.txt``: N rows ``r g b``, the light strengths, so that a Lambertian pixel is
   ``value / 65535 = ρ · intensity · (n·l)`` (a grey image repeats its strength in the three columns);
@@ -222,13 +223,17 @@ class ModelCapture:
 
 
 def model_capture(
-    scene: Scene, directions: ArrayLike, dark_level: float = 0.02, saturation_level: float = 0.98
+    scene: Scene,
+    directions: ArrayLike,
+    dark_level: float = 0.02,
+    saturation_level: float = 0.98,
+    names: Sequence[str] | None = None,
 ) -> ModelCapture:
     """Render the lights at sphere-frame ``directions`` (N, 3) with the NumPy renderer (shadow rays),
     recover the normals from those images (:func:`~optlight.photometric_stereo.recover_from_scene`,
     the directional model) and package both in the DiLiGenT layout (x right, y up, z towards the
     camera): the images, light directions and intensities (``gain · power``), the mask, and
-    ``normals.npy`` / ``albedo.npy``."""
+    ``normals.npy`` / ``albedo.npy``. ``names``: the images' file names (default ``001.png`` …)."""
     d = np.asarray(directions, float)
     images = render_set(scene, d)
     recovery = recover_from_scene(scene, d, images, dark_level, saturation_level)
@@ -242,6 +247,7 @@ def model_capture(
             np.full(len(d), light.gain * light.power),
             scene.gbuffer.mask,
             saturation=light.saturation,
+            names=names,
         ),
         **recovery_files(normals_camera, recovery.albedo, recovery.valid),
     }

@@ -61,6 +61,11 @@ class UsageError(OptlightError):
         super().__init__(f"{option}: {message}")
 
 
+class OutputError(OptlightError):
+    """An output cannot be written: the disk is full, a file is too large, the folder is locked by
+    another run. Names the folder and the cause."""
+
+
 class RobotError(OptlightError):
     """A robot or frame cannot be loaded (unknown name, missing file, unknown frame)."""
 
@@ -71,6 +76,14 @@ class UnreachableError(OptlightError):
 
 class SolverError(OptlightError):
     """A numerical solver failed in a way the caller cannot recover from."""
+
+
+class CaptureSolverError(SolverError):
+    """The trajectory NLP found no way between the captures ``first`` and ``last`` (visiting order)."""
+
+    def __init__(self, message: str, first: int, last: int) -> None:
+        super().__init__(message)
+        self.first, self.last = int(first), int(last)
 
 
 def iteration_limit_error(what: str, max_iter: int) -> SolverError:

@@ -1,5 +1,5 @@
-"""Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml, captures.csv
-and figures (DESIGN §6–§7).
+"""Export of a verified plan: trajectory.csv, plan.json, lights.lp, joint_trajectory.yaml and its
+FollowJointTrajectory goal, captures.csv and figures (docs/design.md §12).
 
 Nothing is written for a plan that failed verification, and no output is ever left half written or
 written over files optlight did not write. The output policy (:func:`check_output_folder`,
@@ -12,10 +12,15 @@ written over files optlight did not write. The output policy (:func:`check_outpu
   files optlight wrote there, written last); it is updated only with ``overwrite`` (the command
   line's ``--force``), and then only the files it lists are replaced or removed: files the user
   added there are kept;
+- an output written in rounds (``optlight acquire --camera folder``: the user adds the images of a
+  round, then runs the command again) says so in its manifest (``"resume": <kind>``, written with
+  ``resumable``); a caller continuing that kind of output (``resume``) updates it without
+  ``overwrite``, by the same rule: only the files the manifest lists are replaced or removed;
 - anything else that exists (a file, a folder holding files optlight did not write, a broken link)
   is refused with a one-line :class:`UsageError`, before any work when the caller checks first;
 - a single output file (a PNG) is written to a temporary name beside it and renamed over it; an
-  existing file is replaced only with ``overwrite``, a folder never.
+  existing file is replaced only with ``overwrite`` and only when it is one optlight wrote (a PNG
+  with optlight's mark, :func:`optlight.viz.images.written_by_optlight`), a folder never.
 
 The final renames run with the stop signals (Ctrl-C, SIGTERM, SIGHUP) deferred
 (:func:`optlight.interrupts.deferred`), so an output appears whole or not at all; until then a signal
@@ -28,25 +33,39 @@ camera frame (x right, y down, z forward) that is (d_x, −d_y, −d_z): see :fu
 
 joint_trajectory.yaml is a ROS 2 ``trajectory_msgs/JointTrajectory`` (``header``, ``joint_names``,
 ``points`` with ``positions``, ``velocities``, ``accelerations``, ``effort`` and
-``time_from_start: {sec, nanosec}``), the ``trajectory`` of a ``control_msgs/FollowJointTrajectory``
-goal; with all three of positions, velocities and accelerations, joint_trajectory_controller
-interpolates quintically between the points, as :func:`read_joint_trajectory` does.
+``time_from_start: {sec, nanosec}``); with all three of positions, velocities and accelerations,
+joint_trajectory_controller interpolates quintically between the points, as
+:func:`read_joint_trajectory` does. Its points are the plan's controller waypoints
+(:mod:`optlight.planning.waypoints`: every dwell and motion boundary, plus the fewest points the
+greedy choice needs for the interpolation to stay within 1e-4 rad of the plan, which the
+verification checks), not samples at the controller rate: trajectory.csv has those.
+follow_joint_trajectory_goal.yaml is the same trajectory as a ``control_msgs/action/FollowJointTrajectory``
+goal, for ``ros2 action send_goal`` (docs/robot.md).
 
 captures.csv has one row per capture: its index, the dwell's start and end, the camera trigger (the
-dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light direction
-in the OpenCV camera frame, the light position in the world and the joint angles at the trigger.
+dwell's start plus ``settle_s``), the image file name (the same as in lights.lp), the light's zenith
+and azimuth on the light sphere (degrees, the angles ``optlight render --zenith --azimuth`` takes:
+zenith from the direction towards the camera, azimuth 0 to the image's right and 90 towards its
+top), the light direction in the frame of lights.lp (columns ``light_dir_right``, ``light_dir_up``,
+``light_dir_to_camera``), the light position in the world and the joint angles at the trigger.
+
+Light directions: one frame for every file that holds them (captures.csv, lights.lp and the DiLiGenT
+folder's ``light_directions.txt``): the unit vector from the object towards the light, x to the
+right of the image, y towards its top, z towards the camera (:data:`LIGHT_FRAME`).
 """
 
 from __future__ import annotations
 
 import csv
 import datetime
+import errno
 import importlib.metadata
 import json
 import os
 import shutil
 import uuid
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
@@ -56,10 +75,11 @@ import orjson
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from optlight import interrupts
-from optlight.errors import UsageError, VerificationError
+from optlight import interrupts, locks
+from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.jsondata import json_safe
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
+from optlight.planning.waypoints import Waypoints
 from optlight.spec import image_names
 from optlight.verify import VerificationReport
 
@@ -71,8 +91,26 @@ LIBRARIES = ("numpy", "scipy", "casadi", "pin", "toppra", "ruckig", "meshcat", "
 RESERVED_KEYS = ("verification", "timing", "versions", "files", "created_utc")
 #: The file optlight writes last into every folder it fills: the files it wrote there (JSON).
 MANIFEST = ".optlight-manifest.json"
+#: The controller's files: the waypoints as a JointTrajectory, and as a FollowJointTrajectory goal.
+JOINT_TRAJECTORY = "joint_trajectory.yaml"
+FOLLOW_JOINT_TRAJECTORY_GOAL = "follow_joint_trajectory_goal.yaml"
+#: How long after the last waypoint's time the joints may take to reach it, in the goal (s).
+GOAL_TIME_TOLERANCE_S = 0.5
 #: Prefix of the hidden staging folders and temporary files (removed unless the process is killed).
 STAGING_PREFIX = ".optlight-staging-"
+#: What a failed write's errno means, said before the system's own words.
+WRITE_FAILURES = {
+    errno.ENOSPC: "the disk is full",
+    errno.EDQUOT: "the disk quota is exceeded",
+    errno.EFBIG: "a file is larger than this system lets a process write",
+}
+#: The frame of every light direction optlight writes (captures.csv, lights.lp, light_directions.txt).
+LIGHT_FRAME = (
+    "unit vector from the object towards the light; x to the right of the image, y towards its top, "
+    "z towards the camera (the OpenCV camera frame's (x, -y, -z))"
+)
+#: captures.csv's columns of the light direction, in :data:`LIGHT_FRAME`.
+LIGHT_DIRECTION_COLUMNS = ("light_dir_right", "light_dir_up", "light_dir_to_camera")
 
 
 def lp_direction(d_camera: ArrayLike) -> Array:
@@ -111,26 +149,24 @@ def _yaml_float(x: float) -> str:
     return text
 
 
-def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float) -> str:
-    """joint_trajectory.yaml (module docstring): the trajectory sampled at :meth:`Trajectory.sample_times`
-    (``rate_hz`` plus every dwell and motion boundary), each time rounded to the nanosecond
-    ``time_from_start`` holds before the trajectory is sampled there, so the file's points are exact."""
+def joint_trajectory_text(waypoints: Waypoints, joint_names: Sequence[str]) -> str:
+    """joint_trajectory.yaml (module docstring): the controller ``waypoints``
+    (:func:`optlight.planning.waypoints.controller_waypoints`), each with its positions, velocities,
+    accelerations and ``time_from_start`` (the nanoseconds the points were sampled at, so the file's
+    points are exact)."""
     names = list(joint_names)
-    if len(names) != trajectory.dof or len(set(names)) != len(names):
-        raise ValueError(f"{len(names)} joint names (distinct) are needed for {trajectory.dof} joints")
-    # the last time may pass the duration by < 0.5 ns, within what Trajectory.sample accepts
-    nanoseconds = np.unique(np.round(trajectory.sample_times(rate_hz) * 1e9).astype(np.int64))
-    q, qd, qdd = trajectory.sample(nanoseconds / 1e9)
+    if len(names) != waypoints.q.shape[1] or len(set(names)) != len(names):
+        raise ValueError(f"{len(names)} joint names (distinct) are needed for {waypoints.q.shape[1]} joints")
+    q, qd, qdd = waypoints.q, waypoints.qd, waypoints.qdd
     if not (np.isfinite(q).all() and np.isfinite(qd).all() and np.isfinite(qdd).all()):
-        raise ValueError("the trajectory has non-finite samples")
-
+        raise ValueError("the waypoints have non-finite values")
     lines = [
         "header: {stamp: {sec: 0, nanosec: 0}, frame_id: \"\"}",
         "joint_names: [" + ", ".join(json.dumps(n) for n in names) + "]",
         "points:",
     ]
     for ns, positions, velocities, accelerations in zip(
-        nanoseconds.tolist(), _yaml_rows(q), _yaml_rows(qd), _yaml_rows(qdd), strict=True
+        waypoints.nanoseconds.tolist(), _yaml_rows(q), _yaml_rows(qd), _yaml_rows(qdd), strict=True
     ):
         lines.append(
             f"  - positions: {positions}\n"
@@ -140,6 +176,25 @@ def joint_trajectory_text(trajectory: Trajectory, joint_names: Sequence[str], ra
             f"    time_from_start: {{sec: {ns // 1_000_000_000}, nanosec: {ns % 1_000_000_000}}}"
         )
     return "\n".join(lines) + "\n"
+
+
+def follow_joint_trajectory_goal_text(
+    waypoints: Waypoints, joint_names: Sequence[str], goal_time_tolerance_s: float = GOAL_TIME_TOLERANCE_S
+) -> str:
+    """follow_joint_trajectory_goal.yaml: a ``control_msgs/action/FollowJointTrajectory`` goal, its
+    ``trajectory`` the text of :func:`joint_trajectory_text` and ``goal_time_tolerance`` (s) how long
+    after the last point's time the joints may take to reach it (the default path and goal
+    tolerances of the controller's configuration apply). ``ros2 action send_goal`` takes it as it is
+    (docs/robot.md)."""
+    if not (np.isfinite(goal_time_tolerance_s) and goal_time_tolerance_s >= 0):
+        raise ValueError(f"goal_time_tolerance_s must be a non-negative number, got {goal_time_tolerance_s}")
+    trajectory = joint_trajectory_text(waypoints, joint_names)
+    ns = round(goal_time_tolerance_s * 1e9)
+    return (
+        "trajectory:\n"
+        + "".join(f"  {line}\n" for line in trajectory.splitlines())
+        + f"goal_time_tolerance: {{sec: {ns // 1_000_000_000}, nanosec: {ns % 1_000_000_000}}}\n"
+    )
 
 
 def _yaml_rows(values: Array) -> list[str]:
@@ -160,13 +215,14 @@ def _yaml_rows(values: Array) -> list[str]:
     return ["[" + ", ".join(texts[i : i + n]) + "]" for i in range(0, len(texts), n)]
 
 
-def write_joint_trajectory(
-    path: str | Path, trajectory: Trajectory, joint_names: Sequence[str], rate_hz: float
-) -> Path:
-    """Write :func:`joint_trajectory_text` to ``path``; returns the path."""
-    out = Path(path)
-    out.write_text(joint_trajectory_text(trajectory, joint_names, rate_hz))
-    return out
+def write_joint_trajectory(folder: str | Path, waypoints: Waypoints, joint_names: Sequence[str]) -> list[Path]:
+    """Write joint_trajectory.yaml (:func:`joint_trajectory_text`) and follow_joint_trajectory_goal.yaml
+    (:func:`follow_joint_trajectory_goal_text`) into ``folder``; returns their paths."""
+    out = Path(folder)
+    files = [out / JOINT_TRAJECTORY, out / FOLLOW_JOINT_TRAJECTORY_GOAL]
+    files[0].write_text(joint_trajectory_text(waypoints, joint_names))
+    files[1].write_text(follow_joint_trajectory_goal_text(waypoints, joint_names))
+    return files
 
 
 def read_joint_trajectory(path: str | Path, *, landmark_intervals: ArrayLike | None = None) -> Trajectory:
@@ -209,17 +265,20 @@ def write_captures(
     image_pattern: str,
     light_directions_camera: ArrayLike,
     light_positions: ArrayLike,
+    light_angles_deg: ArrayLike,
     joint_names: Sequence[str],
 ) -> Path:
     """Write captures.csv (module docstring): one row per dwell of ``trajectory``; the trigger is the
     dwell's start plus ``settle_s`` (0 ≤ settle_s < each dwell's length), the joint angles are the
-    trajectory's at the trigger. Directions (unit, camera frame) and positions (m, world) per capture."""
+    trajectory's at the trigger. Per capture: the direction (unit, OpenCV camera frame; written in
+    :data:`LIGHT_FRAME`), the position (m, world) and the (zenith, azimuth) in degrees."""
     intervals = trajectory.landmark_intervals
     m = intervals.shape[0]
-    directions = np.asarray(light_directions_camera, float).reshape(-1, 3)
+    directions = lp_direction(np.asarray(light_directions_camera, float).reshape(-1, 3))
     positions = np.asarray(light_positions, float).reshape(-1, 3)
-    if directions.shape[0] != m or positions.shape[0] != m:
-        raise ValueError(f"expected {m} light directions and positions, one per capture")
+    angles = np.asarray(light_angles_deg, float).reshape(-1, 2)
+    if directions.shape[0] != m or positions.shape[0] != m or angles.shape[0] != m:
+        raise ValueError(f"expected {m} light directions, positions and angles, one per capture")
     lengths = intervals[:, 1] - intervals[:, 0]
     if not (settle_s >= 0 and np.all(settle_s < lengths)):
         raise ValueError(f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell ({lengths.min():.6g} s)")
@@ -227,8 +286,8 @@ def write_captures(
     trigger = intervals[:, 0] + settle_s
     q = trajectory.sample(trigger)[0] if m else np.zeros((0, len(joint_names)))
     header = (
-        ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image"]
-        + [f"light_dir_camera_{a}" for a in "xyz"]
+        ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image", "zenith_deg", "azimuth_deg"]
+        + list(LIGHT_DIRECTION_COLUMNS)
         + [f"light_position_{a}_m" for a in "xyz"]
         + [f"q_{n}" for n in joint_names]
     )
@@ -239,7 +298,7 @@ def write_captures(
         for i in range(m):
             writer.writerow(
                 [i, *(f"{x:.9f}" for x in (*intervals[i], trigger[i])), names[i]]
-                + [f"{x:.12g}" for x in (*directions[i], *positions[i], *q[i])]
+                + [f"{x:.12g}" for x in (*angles[i], *directions[i], *positions[i], *q[i])]
             )
     return out
 
@@ -383,17 +442,35 @@ class OutputTarget:
 
 
 def check_output_folder(
-    folder: str | Path, *, overwrite: bool = False, option: str = "folder", force: str = "overwrite=True"
+    folder: str | Path,
+    *,
+    overwrite: bool = False,
+    option: str = "folder",
+    force: str = "overwrite=True",
+    resume: str | None = None,
 ) -> OutputTarget:
     """Whether ``folder`` may receive an output folder (module docstring), and where to stage it.
 
     ``option`` names the folder in errors (``--out`` on the command line), ``force`` what the
-    caller passes to allow replacing an earlier output. Raises :class:`UsageError` for an existing
+    caller passes to allow replacing an earlier output; ``resume`` the kind of output in rounds the
+    caller continues (an earlier output whose manifest names that kind is updated as with
+    ``overwrite``). Raises :class:`UsageError` for an existing
     file or broken link, a non-empty folder without a valid manifest, an earlier output without
     ``overwrite``, and a location where nothing can be written (tried by creating and removing a
-    staging folder there). Writes nothing that stays.
+    staging folder there); :class:`OutputError` when another run is writing the folder (its lock,
+    :mod:`optlight.locks`, kept from here to the end of a command). Writes nothing that stays.
     """
     path = Path(folder)
+    locks.acquire(path)
+    try:
+        return _check_output_folder(path, overwrite, option, force, resume)
+    finally:
+        locks.release(path)
+
+
+def _check_output_folder(
+    path: Path, overwrite: bool, option: str, force: str, resume: str | None
+) -> OutputTarget:
     if path.is_symlink() and not path.exists():
         raise UsageError(option, f"{path} is a broken symbolic link; give a new or empty folder")
     if not path.exists():
@@ -417,7 +494,7 @@ def check_output_folder(
                 f"{path} is not empty and holds files optlight did not write; give a new or empty folder "
                 "(optlight never replaces files it did not write)",
             )
-        if not overwrite:
+        if not overwrite and (resume is None or _manifest_resume(path) != resume):
             raise UsageError(
                 option,
                 f"{path} holds the output of an earlier optlight run; pass {force} to replace it "
@@ -435,47 +512,85 @@ def write_folder(
     overwrite: bool = False,
     option: str = "folder",
     force: str = "overwrite=True",
+    resume: str | None = None,
+    resumable: str | None = None,
 ) -> list[Path]:
     """Fill ``folder`` with the files ``write(staging)`` writes into the staging folder it is given
     (it returns their paths), following the output policy; returns the paths in ``folder``.
+    ``resume``: as for :func:`check_output_folder`; ``resumable``: the kind of output in rounds this
+    one is, recorded in the manifest so that the next round may continue it (None: a finished output).
 
     The staging folder is removed when ``write`` raises or Ctrl-C arrives before the final renames;
-    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises, and
+    those run with Ctrl-C deferred. Raises what :func:`check_output_folder` raises,
     :class:`UsageError` (nothing changed) when a file to write exists in the folder without being
-    listed in its manifest (it appeared after the check).
+    listed in its manifest (it appeared after the check), and :class:`OutputError` naming the
+    folder and the cause when the system refuses a write (a full disk, a file size limit).
     """
-    target = check_output_folder(folder, overwrite=overwrite, option=option, force=force)
+    locks.acquire(folder)  # held until the output is in place
+    try:
+        target = check_output_folder(folder, overwrite=overwrite, option=option, force=force, resume=resume)
+    except BaseException:
+        locks.release(folder)
+        raise
     staging = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}"
+    moving = False
     try:
         with interrupts.deferred():  # created, then removed by the finally below: never left behind
             staging.mkdir()
         interrupts.reached("staging-created")
         files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
         names = sorted({str(f) for f in files})
-        (staging / MANIFEST).write_text(
-            json.dumps({"written_by": f"optlight {_version()}", "files": names}, indent=1) + "\n"
-        )
+        manifest: dict[str, Any] = {"written_by": f"optlight {_version()}", "files": names}
+        if resumable is not None:
+            manifest["resume"] = resumable
+        (staging / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
         interrupts.check()  # an interrupt a library swallowed while writing
         interrupts.reached("staging-written")
         with interrupts.deferred():
             interrupts.reached("renames")  # held back until the output is in place
+            moving = True
             _move_into_place(staging, target, names, option)
+    except OSError as e:
+        partial = "some of its files may be the new output's" if moving and target.exists else "nothing was written"
+        raise _write_error(target.path, e, staging, partial) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)  # gone already when renamed into place
+        locks.release(folder)
     return [target.path / f for f in files]
 
 
 def check_output_file(
-    path: str | Path, *, overwrite: bool = False, option: str = "file", force: str = "overwrite=True"
+    path: str | Path,
+    *,
+    overwrite: bool = False,
+    option: str = "file",
+    force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> OutputTarget:
     """Whether an output file may be written at ``path``: an existing file only with ``overwrite``,
-    never a folder; the nearest existing folder above it must be writable. Raises :class:`UsageError`."""
+    and then only when ``ours(path)`` says optlight wrote it (when given), never a folder; the nearest
+    existing folder above it must be writable. Raises :class:`UsageError`, and :class:`OutputError`
+    when another run is writing the file (as :func:`check_output_folder`)."""
     out = Path(path)
+    locks.acquire(out)
+    try:
+        return _check_output_file(out, overwrite, option, force, ours)
+    finally:
+        locks.release(out)
+
+
+def _check_output_file(
+    out: Path, overwrite: bool, option: str, force: str, ours: Callable[[Path], bool] | None
+) -> OutputTarget:
     if out.is_dir():
         raise UsageError(option, f"{out} is a folder; give the path of the file to write")
     exists = out.exists() or out.is_symlink()
     if exists and not overwrite:
         raise UsageError(option, f"{out} exists; pass {force} to replace it")
+    if exists and ours is not None and (out.is_symlink() or not ours(out)):
+        raise UsageError(
+            option, f"{out} exists and optlight did not write it; {force} replaces only a file optlight wrote"
+        )
     anchor = _existing_ancestor(out, option)
     _probe(anchor, option)
     return OutputTarget(out, anchor, exists=exists)
@@ -488,10 +603,17 @@ def write_file(
     overwrite: bool = False,
     option: str = "file",
     force: str = "overwrite=True",
+    ours: Callable[[Path], bool] | None = None,
 ) -> Path:
     """Write one file through ``write(temporary)`` (the temporary path keeps ``path``'s suffix) and
-    rename it to ``path`` (missing folders above it created then), following the output policy."""
-    target = check_output_file(path, overwrite=overwrite, option=option, force=force)
+    rename it to ``path`` (missing folders above it created then), following the output policy
+    (``ours``: see :func:`check_output_file`)."""
+    locks.acquire(path)  # held until the file is in place
+    try:
+        target = check_output_file(path, overwrite=overwrite, option=option, force=force, ours=ours)
+    except BaseException:
+        locks.release(path)
+        raise
     out = target.path
     temporary = target.anchor / f"{STAGING_PREFIX}{uuid.uuid4().hex[:12]}{out.suffix}"
     try:
@@ -500,9 +622,36 @@ def write_file(
         with interrupts.deferred():
             out.parent.mkdir(parents=True, exist_ok=True)
             os.replace(temporary, out)
+    except OSError as e:
+        raise _write_error(out, e, temporary) from None
     finally:
         temporary.unlink(missing_ok=True)
+        locks.release(path)
     return out
+
+
+@contextmanager
+def writes_into(folder: Path, kept: str) -> Iterator[None]:
+    """Writes into ``folder`` outside :func:`write_folder` (a batch's records and table, which a run
+    adds as it goes): a write the system refuses is an :class:`OutputError` naming the folder, the
+    cause and what is ``kept``."""
+    try:
+        yield
+    except OSError as e:
+        raise _write_error(folder, e, folder, kept) from None
+
+
+def _write_error(path: Path, error: OSError, within: Path, done: str = "nothing was written") -> OutputError:
+    """The one-line error for ``error``, met while writing the output ``path`` through ``within``
+    (the staging folder, the temporary file, the folder itself): the folder, the cause, the file it
+    was writing (relative to ``within``), and what was ``done``."""
+    cause = error.strerror or str(error)
+    if error.errno in WRITE_FAILURES:
+        cause = f"{WRITE_FAILURES[error.errno]} ({cause})"
+    if error.filename:
+        name = Path(os.fsdecode(error.filename))
+        cause += f" at {name.relative_to(within) if name.is_relative_to(within) and name != within else name}"
+    return OutputError(f"cannot write {path}: {cause}; {done}")
 
 
 def _existing_ancestor(path: Path, option: str) -> Path:
@@ -541,6 +690,16 @@ def _read_manifest(folder: Path) -> tuple[str, ...] | None:
         if p.is_absolute() or ".." in p.parts or str(p) == MANIFEST or "\\" in f:
             return None
     return tuple(files)
+
+
+def _manifest_resume(folder: Path) -> str | None:
+    """The kind of output in rounds the folder's manifest says may be continued, or None."""
+    try:
+        data = json.loads((folder / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    kind = data.get("resume") if isinstance(data, dict) else None
+    return kind if isinstance(kind, str) else None
 
 
 def _move_into_place(staging: Path, target: OutputTarget, names: Sequence[str], option: str) -> None:

@@ -1,4 +1,4 @@
-"""Light-sphere geometry (DESIGN §2–§3): sphere coordinates, great circles, light frames, h(q).
+"""Light-sphere geometry (docs/design.md §2–§3): sphere coordinates, great circles, light frames, h(q).
 
 The light sphere S has centre O, radius b and pole axis z_S from O towards the camera, so
 zenith θ = 0 is frontal light. x_S = normalize(up × z_S) with up the world z axis (world x when
@@ -109,7 +109,7 @@ def aim_rotation(position: ArrayLike, center: ArrayLike, reference_x: ArrayLike)
 
 
 def h_residual(position: Any, rotation: Any, center: Any, radius: Any) -> Any:
-    """The light constraints h1–h3 (DESIGN §3): h = R_Lᵀ (O − a_L) − [0, 0, b]; zero iff the
+    """The light constraints h1–h3 (docs/design.md §3): h = R_Lᵀ (O − a_L) − [0, 0, b]; zero iff the
     light is on the sphere and its +z axis passes through O. Units: metres.
 
     The one definition of h: NumPy arrays give a (3,) array, or (k, 3) for k poses (positions

@@ -1,4 +1,4 @@
-"""Luminance objectives (DESIGN §4): soft histograms, histogram distances, image terms.
+"""Luminance objectives (docs/design.md §4): soft histograms, histogram distances, image terms.
 
 Every term is a pure function of the pixel vector of the object, with two twins that compute the
 same number: ``numpy(u)`` on arrays (batched over leading axes) and ``casadi(u)`` on an MX column,
@@ -430,19 +430,23 @@ def reference_from_image(
     mask: Path | None = None,
     saturation: float = 1.0,
     file: str = "<api>",
+    size: tuple[int, int] | None = None,
 ) -> Reference:
     """A reference from an image file, sampled at the object's pixels of ``scene``.
 
-    An image of the camera's size is used as is; another size is resized (bilinear) to it first.
+    ``size`` (width, height): the size the image and the mask must have (the problem's camera; a
+    :class:`ProblemError` with both sizes otherwise), or None to take any size. The image is then
+    resized (bilinear) to ``scene``'s camera, which renders the search at a lower resolution.
     ``mask`` (non-zero = compared, resized by nearest neighbour) restricts the compared pixels to
     the object pixels it covers; the rendered image is restricted to the same pixels."""
     cam, gb = scene.camera, scene.gbuffer
-    img = resize_image(
-        read_image(image, saturation, file, "objective.reference.image"), cam.width, cam.height
-    )
+    key = "objective.reference.image"
+    img = _sized(read_image(image, saturation, file, key), size, image, file, key)
+    img = resize_image(img, cam.width, cam.height)
     selection = None
     if mask is not None:
-        m = read_image(mask, 1.0, file, "objective.reference.mask")
+        key = "objective.reference.mask"
+        m = _sized(read_image(mask, 1.0, file, key), size, mask, file, key)
         m = resize_image(m, cam.width, cam.height, nearest=True)
         selection = np.flatnonzero(m.ravel()[gb.pixel_index] != 0)
         if selection.size == 0:
@@ -450,6 +454,20 @@ def reference_from_image(
                 file, "objective.reference.mask", "a mask covering some object pixels", str(mask)
             )
     return reference_from_pixels(histogram, img.ravel()[gb.pixel_index], selection, f"image {image.name}")
+
+
+def _sized(img: Array, size: tuple[int, int] | None, path: Path, file: str, key: str) -> Array:
+    """``img`` when ``size`` (width, height) is None or its size; else a :class:`ProblemError` naming
+    ``key`` with both sizes: an image of another size would be stretched to the camera's."""
+    if size is not None and img.shape != (size[1], size[0]):
+        raise ProblemError(
+            file,
+            key,
+            f"an image of the camera's size, {size[0]} × {size[1]} px (camera.width × camera.height), or "
+            "objective.reference.resize = true to resize it",
+            f"{path.name} of {img.shape[1]} × {img.shape[0]} px",
+        )
+    return img
 
 
 def reference_from_light(
@@ -512,8 +530,9 @@ class Objective:
                     file, "objective.reference.image", "an image path (reference.kind = 'image')"
                 )
             mask = None if ref.mask is None else problem.resolve(ref.mask)
+            size = None if ref.resize else (problem.camera.width, problem.camera.height)
             reference = reference_from_image(
-                scene, histogram, problem.resolve(ref.image), mask, saturation, file
+                scene, histogram, problem.resolve(ref.image), mask, saturation, file, size
             )
         else:
             if ref.bins is None:

@@ -1,4 +1,4 @@
-"""Photometric stereo (DESIGN §10): normals and albedo from N images under N known distant lights.
+"""Photometric stereo (docs/design.md §10): normals and albedo from N images under N known distant lights.
 
 Model (Lambertian, distant lights): pixel p under light k has the value
 
@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import OptlightError, ProblemError
+from optlight.scene.response import linearise
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -197,11 +198,14 @@ def recover_from_scene(
     saturation_level: float = 0.98,
 ) -> NormalRecovery:
     """:func:`recover_normals` for images of ``scene`` under lights at sphere-frame ``directions``:
-    world-frame light directions, strengths ``gain · power``, the object mask, the model's ambient
-    image subtracted; the normals come out in the world frame (compare with
+    the images as the scene renders them, linearised by its response (``scene.response_gamma``, a
+    calibrated model's), world-frame light directions, strengths ``gain · power``, the object mask,
+    the model's ambient image subtracted; the normals come out in the world frame (compare with
     :func:`gbuffer_normal_map`). Assumes the directional light model."""
     light = scene.light
     world = np.asarray(directions, float) @ scene.sphere.rotation.T
+    if scene.response_gamma != 1.0:
+        images = linearise(images, light.saturation, scene.response_gamma)
     return recover_normals(
         images,
         world,

@@ -1,10 +1,11 @@
 """The whole job: ``plan = optlight.solve(problem)``, then ``plan.save(folder)``.
 
-A straight line of stages, each taking built objects and returning a typed result (each timed in
-``Plan.timings``):
+A straight line of stages, each taking built objects and returning a typed result, each timed in
+``Plan.timings`` and heard by the caller's ``on_stage`` listener as it finishes (:mod:`optlight.stages`;
+the solve draws nothing and writes nothing):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
-   (no stage of the solve when the caller passes it built, as the command line does in its checks);
+   (not timed when the caller passes it built, as the command line does in its checks; still heard);
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
    on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
    designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-
@@ -24,9 +25,10 @@ A straight line of stages, each taking built objects and returning a typed resul
    back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
-7. ``verify``: dense resampling, independent of the planner (exact coal distances for the
+7. ``verify``: the controller waypoints chosen (:func:`~optlight.planning.waypoints.controller_waypoints`),
+   then dense resampling, independent of the planner (exact coal distances for the
    environment; the jerk and the acceleration continuity at ``[trajectory] rate_hz``; the exact view
-   and beam check at the captures, always).
+   and beam check at the captures, always; the waypoints' quintic interpolation).
 """
 
 from __future__ import annotations
@@ -36,7 +38,6 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import Future
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
@@ -45,7 +46,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
-from optlight.errors import SolverError
+from optlight.errors import CaptureSolverError, SolverError
+from optlight.motion import Trajectory
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
@@ -65,14 +67,22 @@ from optlight.planning.set_landmarks import (
     set_summary,
     tour_order,
 )
-from optlight.planning.timing import Trajectory, time_parameterize
-from optlight.planning.trajectory import TrajectoryNLPResult, knot_cost, optimize_knots, plan_transfer
-from optlight.report import landmark_jobs, motion_jobs
+from optlight.planning.timing import time_parameterize
+from optlight.planning.torque_scaling import within_torque_limits
+from optlight.planning.trajectory import (
+    TrajectoryNLPResult,
+    follow_planned_path,
+    knot_cost,
+    knots_on_arcs,
+    optimize_knots,
+    plan_transfer,
+)
+from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, check_trajectory_samples
+from optlight.stages import OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
-from optlight.viz.drawing import FigureWorker
 
 Array = NDArray[np.float64]
 
@@ -86,18 +96,20 @@ def solve(
     problem: Problem | Setup | str | Path,
     *,
     progress: Progress | None = None,
-    worker: FigureWorker | None = None,
+    on_stage: StageListener | None = None,
 ) -> Plan:
     """Solve a problem (a :class:`Problem`, a built :class:`Setup`, a file path or a built-in name)
-    end to end. With a ``worker`` (:class:`~optlight.viz.drawing.FigureWorker`) the figures of the
-    results folder are drawn there while the rest is solved (:attr:`Plan.figures`): the landmark
-    figures once the captures are placed, the motion's once it is timed.
+    end to end. ``on_stage(stage, result)`` hears each stage finish, with its typed result
+    (:mod:`optlight.stages`): the command line subscribes the figure worker there
+    (:class:`~optlight.report.FigureDrafts`), which draws the results folder's figures while the rest
+    is solved.
 
     Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
     the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
     shown); :meth:`Plan.save` refuses to export it.
     """
     notify = progress or (lambda stage, done, total: None)
+    heard = on_stage or (lambda stage, result: None)
     timings: dict[str, float] = {}
     t_total = time.perf_counter()
 
@@ -109,11 +121,12 @@ def solve(
         timings[name] = time.perf_counter() - start
         notify(name, 1, 1)
 
-    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): no stage here
+    if isinstance(problem, Setup):  # built by the caller (the command line, in its checks): not timed here
         setup = problem
     else:
         with stage("scene"):
             setup = Setup.from_problem(problem)
+    heard("scene", setup)
 
     start = time.perf_counter()
     reacher = Reacher(setup)
@@ -122,33 +135,51 @@ def solve(
             setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
         )
         timings["landmarks"] = time.perf_counter() - start
+        heard("landmarks", landmarks)
 
         with stage("placement"):  # what is left of it once the search is done
             if design is None:
                 placement = ahead.placement(captures)
             else:
                 placement = place_captures(setup, captures, design, reacher)
-    figures: dict[str, Future[bytes]] = {}
-    if worker is not None:  # drawn there while the motion is planned, with the captures placed
-        jobs = landmark_jobs(landmarks, setup.scene, placement.landmarks)
-        figures = {n: worker.draw(job) for n, job in jobs.items()}
+    heard("placement", placement)
     notes = [*landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
         order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
         visited = tuple(placement.landmarks[i] for i in order)
-        positions = np.array([lm.position for lm in visited])
         landmark_thetas = placement.thetas[order]
-        path = capture_path(setup, positions, landmark_thetas)
+        path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
         warm, failures = knot_ik(setup, path, landmark_thetas)
-    lightset = set_summary(setup, design, placement.landmarks, placement.thetas, order) if design else None
+    heard("path", Route(order, visited, landmark_thetas, path, warm, failures))
     if failures.any():
         notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
 
     with stage("nlp"):
-        path, warm, nlp = optimize_path(
-            setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
-        )
+        while True:
+            try:
+                path, warm, nlp = optimize_path(
+                    setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
+                )
+                break
+            except CaptureSolverError as error:
+                if not setup.landmark_spec.allow_partial or len(visited) < 2:
+                    raise
+                k = hardest_capture(landmark_thetas, error.first, error.last)
+                lm = visited[k]
+                notes.append(
+                    f"dropped landmark {lm.index} (zenith {np.degrees(lm.zenith):.1f}°, azimuth "
+                    f"{np.degrees(lm.azimuth):.1f}°), capture {k} of the visiting order: the trajectory NLP "
+                    f"found no way {error}; of its captures this one needs the largest reconfiguration"
+                )
+                visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
+                path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
+                warm, failures = knot_ik(setup, path, landmark_thetas)
+    heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
+    positions = np.array([lm.position for lm in visited])
+    lightset = (
+        set_summary(setup, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
+    )
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
         notes.append(
@@ -158,12 +189,17 @@ def solve(
         )
 
     with stage("timing"):
-        trajectory = time_knots(setup, path, nlp.theta)
-    if worker is not None:  # drawn while the plan is verified (dropped with it if it fails)
-        figures |= {n: worker.draw(job) for n, job in motion_jobs(setup, visited, nlp.theta, trajectory).items()}
+        timed_path, timed_knots = knots_on_path(setup, path, nlp.theta)
+        trajectory = time_knots(setup, timed_path, timed_knots)
+        dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
+        # before it is sampled: its samples must fit in this machine's memory
+        check_trajectory_samples(setup.problem, setup.robot.n, trajectory.duration, dwell)
+    heard("timing", trajectory)
 
     with stage("verify"):
-        report = verify_knots(setup, trajectory, positions, nlp.theta, path.transfers)
+        waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, setup.trajectory_spec.rate_hz))
+        report = verify_knots(setup, trajectory, positions, timed_knots, timed_path.transfers, waypoints)
+    heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
     for note in notes:
         warnings.warn(note, stacklevel=2)
@@ -176,12 +212,12 @@ def solve(
         knot_ik=warm,
         nlp=nlp,
         trajectory=trajectory,
+        waypoints=waypoints,
         verification=report,
         timings=timings,
         warnings=tuple(notes),
         lightset=lightset,
         reach=design.reach if design is not None else None,
-        figures=figures,
     )
 
 
@@ -224,10 +260,9 @@ class PlacementAhead:
     while the landmark search goes on: each landmark is placed as the search finds it (:meth:`offer`),
     its placement needing only the landmarks before it. The search leaves a core partly idle and
     the placement, a chain of IPOPT solves, uses one; most of both runs without the GIL (Embree's
-    rays, NumPy's kernels, IPOPT), so on the two cores of the benchmark machine the search and the
-    placement of the default face took 0.93–1.02 s together instead of 1.06–1.10 s, those of the
-    144-capture / 3-obstacle scaling cell 6.1–6.3 s instead of 7.0 s (alternating runs; the search
-    takes longer, the placement left after it much less), with the same placement to the bit.
+    rays, NumPy's kernels, IPOPT), so on two cores the search and the placement together take
+    ~10 % less than one after the other (the search takes longer, the placement left after it
+    much less), with the same placement to the bit.
 
     The chain takes every landmark offered for a capture. :meth:`placement` returns its placement
     when the captures are the landmarks offered, in their order; when some were merged
@@ -324,7 +359,7 @@ def optimize_path(
     :func:`optimize_window`), and where it finds no way from there, it is solved again together with
     the window before it. Returns the path (with the transfers the windows needed), its warm start
     and the NLP's result over all knots; raises :class:`SolverError` naming the captures of the
-    window that failed. ``progress(done, total)`` after each window.
+    window that failed (:class:`CaptureSolverError`). ``progress(done, total)`` after each window.
 
     Why windows: one NLP over all knots needs as many iterations as its hardest stretch needs, for
     every knot; on the scaling benchmark's 576 captures among 3 obstacles it did not converge in
@@ -346,9 +381,9 @@ def optimize_path(
             except SolverError as e:
                 error = e
         else:
-            if len(windows) == 1:
-                raise error
-            raise SolverError(f"between captures {first} and {last} (visiting order): {error}") from error
+            raise CaptureSolverError(
+                f"between captures {first} and {last} (visiting order): {error}", first, last
+            ) from error
         warm[knots], theta[knots], transfers[start:last] = warm_window, result.theta, window.transfers
         results.append(result)
         if progress is not None:
@@ -399,6 +434,16 @@ def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -
     )
 
 
+def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
+    """Of the captures ``first`` … ``last`` (visiting order) with postures ``landmark_thetas`` (M, n),
+    rad, the one whose posture is farthest from its neighbours' (Σ over the segments before and after
+    it of the largest joint's change): the capture the trajectory NLP drops first when it finds no way
+    through them (``[landmarks] allow_partial``)."""
+    steps = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
+    around = np.concatenate([[0.0], steps]) + np.concatenate([steps, [0.0]])
+    return first + int(np.argmax(around[first : last + 1]))
+
+
 def unfollowed_segments(
     setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64]
 ) -> NDArray[np.bool_]:
@@ -415,12 +460,45 @@ def unfollowed_segments(
     return unfollowed
 
 
+def knots_on_path(setup: Setup, path: LightPath, theta: Array) -> tuple[LightPath, Array]:
+    """The path and its knots ``theta`` (K, n) (rad) with knots added on the great-circle arcs of the
+    segments on the sphere where two knots' lights are far apart
+    (:func:`~optlight.planning.trajectory.knots_on_arcs`): the planned path the timing follows and
+    the verification measures against. The added knots' directions, positions and rotations are
+    their lights' (as are those of the other knots of their segment); the transfers' are kept."""
+    segments = path.segments()
+    refined = [theta[s] if off else knots_on_arcs(setup, theta[s]) for s, off in zip(segments, path.transfers, strict=True)]
+    if sum(len(k) for k in refined) == sum(s.stop - s.start for s in segments):
+        return path, theta
+    knots, directions, positions, rotations = [theta[:1]], [path.directions[:1]], [path.positions[:1]], [path.rotations[:1]]
+    for s, off, part in zip(segments, path.transfers, refined, strict=True):
+        if off:
+            poses = (path.directions[s], path.positions[s], path.rotations[s])
+        else:
+            a, r = zip(*(setup.robot.light_pose(q) for q in part), strict=True)
+            a_arr = np.array(a)
+            d = a_arr - setup.sphere.center
+            poses = (d / np.linalg.norm(d, axis=1, keepdims=True), a_arr, np.array(r))
+        knots.append(part[1:])
+        for out, values in zip((directions, positions, rotations), poses, strict=True):
+            out.append(values[1:])
+    landmark_knots = np.concatenate([[0], np.cumsum([len(k) - 1 for k in refined])]).astype(np.int64)
+    refined_path = LightPath(
+        np.vstack(directions), np.vstack(positions), np.concatenate(rotations), path.order, landmark_knots, path.transfers
+    )
+    return refined_path, np.vstack(knots)
+
+
 def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     """The timed trajectory through the knots ``theta`` (K, n) (rad) of ``path``: the transfer from the
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits."""
+    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits and, on the
+    sphere, within :data:`~optlight.planning.trajectory.PATH_DEVIATION_M` of the planned path
+    (:func:`~optlight.planning.trajectory.follow_planned_path`); the whole motion slowed where its
+    joint torques would exceed the robot's limits
+    (:func:`~optlight.planning.torque_scaling.within_torque_limits`)."""
     spec, limits = setup.trajectory_spec, setup.limits
     approach = plan_transfer(setup, setup.start, theta[0])
     retreat = (
@@ -428,29 +506,45 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
         if spec.return_home
         else None
     )
-    segments = [theta[s] for s in path.segments()] or [theta[:1]]  # one landmark: its dwell
-    timed: Callable[..., Trajectory] = (
-        partial(jerk_limited_timing, segments, limits.velocity, limits.acceleration, limits.jerk)
-        if spec.timing == "jerk_limited"
-        else partial(time_parameterize, segments, limits.velocity, limits.acceleration)
-    )
-    return timed(
-        spec.dwell_s,
-        joint_names=setup.robot.joint_names,
-        approach=approach,
-        retreat=retreat,
-        position_bounds=(limits.lower, limits.upper),
-    )
+    segments = [
+        theta[s] if off else follow_planned_path(setup, theta[s])
+        for s, off in zip(path.segments(), path.transfers, strict=True)
+    ] or [theta[:1]]  # one landmark: its dwell
+
+    def timed(scale: float) -> Trajectory:
+        """The motion timed with the limits scaled for the torques (planning/torque_scaling.py)."""
+        v, a, j = np.sqrt(scale) * limits.velocity, scale * limits.acceleration, scale**1.5 * limits.jerk
+        timing: Callable[..., Trajectory] = (
+            partial(jerk_limited_timing, segments, v, a, j)
+            if spec.timing == "jerk_limited"
+            else partial(time_parameterize, segments, v, a)
+        )
+        return timing(
+            spec.dwell_s,
+            joint_names=setup.robot.joint_names,
+            approach=approach,
+            retreat=retreat,
+            position_bounds=(limits.lower, limits.upper),
+        )
+
+    return within_torque_limits(timed, setup.dynamics)
 
 
 def verify_knots(
-    setup: Setup, trajectory: Trajectory, positions: Array, theta: Array, transfers: NDArray[np.bool_]
+    setup: Setup,
+    trajectory: Trajectory,
+    positions: Array,
+    theta: Array,
+    transfers: NDArray[np.bool_],
+    waypoints: Waypoints | None = None,
 ) -> VerificationReport:
     """Verify ``trajectory`` independently of the planner, at max(1 kHz, ``rate_hz``): limits (jerk
     and acceleration continuity when jerk-limited), h and aim at the captures ``positions`` (M, 3)
     (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
     where the light must stay outside the sphere, the environment by exact coal distances, the
-    camera's view and the beam by exact ray casting at the captures."""
+    camera's view and the beam by exact ray casting at the captures, the joint torques (the lamp
+    included) against the robot's torque limits, and the quintic interpolation of the controller
+    ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
         trajectory,
@@ -474,5 +568,7 @@ def verify_knots(
             if setup.problem.view.mode != "off"
             else None
         ),
+        waypoints=waypoints,
+        dynamics=setup.dynamics,
         rate_hz=max(1000.0, spec.rate_hz),
     )

@@ -18,16 +18,18 @@ from numpy.typing import NDArray
 
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
+from optlight.motion import Trajectory
+from optlight.planning.jerk import rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
-from optlight.planning.timing import Trajectory
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, image_names
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob, FigureWorker
 from optlight.viz.preview import Preview
@@ -45,12 +47,12 @@ class Plan:
     ``setup`` the built problem; ``landmarks`` the landmark search; ``visited`` the landmarks kept,
     in visiting order; ``landmark_thetas`` (M, n) joint angles at them; ``path`` the light's knots;
     ``knot_ik`` the per-knot IK configurations (K, n) (the paper's pipeline); ``nlp`` the optimised
-    knots; ``trajectory`` the timed motion; ``verification`` the independent check; ``timings``
+    knots; ``trajectory`` the timed motion; ``waypoints`` its points for a controller that interpolates
+    quintically (joint_trajectory.yaml); ``verification`` the independent check; ``timings``
     seconds per stage and ``total``; ``warnings`` what was dropped or degraded; ``lightset`` a light
     set's requested vs achieved lights and set cost (:func:`~optlight.planning.set_landmarks.set_summary`),
     None without ``[lightset]``; ``reach`` the reachability map a light set was designed over (None
-    for other plans); ``figures`` the results folder's figures a worker process drew while the rest
-    was solved (``solve(..., worker=...)``), by file stem, which :meth:`save` takes as they are.
+    for other plans).
     """
 
     setup: Setup
@@ -61,12 +63,12 @@ class Plan:
     knot_ik: Array
     nlp: TrajectoryNLPResult
     trajectory: Trajectory
+    waypoints: Waypoints
     verification: VerificationReport
     timings: dict[str, float]
     warnings: tuple[str, ...] = field(default=())
     lightset: dict[str, Any] | None = None
     reach: ReachabilityMap | None = None
-    figures: Mapping[str, Future[bytes]] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def problem(self) -> Problem:
@@ -94,6 +96,33 @@ class Plan:
         intervals = self.trajectory.landmark_intervals
         return float(self.trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0]))
 
+    def motion_bound(self) -> dict[str, float]:
+        """The moving time against its rest-to-rest lower bound (s): the time-optimal moves between
+        the trajectory's postures at its captures, in its order, from the start configuration to the
+        first capture and back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
+        (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
+        paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
+        moves from and to the start."""
+        trajectory, limits = self.trajectory, self.setup.limits
+        intervals = trajectory.landmark_intervals
+        approach = bool(intervals[0, 0] > 0)
+        retreat = bool(trajectory.duration > intervals[-1, 1])
+        # the trajectory's own postures: at each dwell (the trajectory NLP may move a capture's joints
+        # in the arm's null space away from its placement), at the start and at the end
+        q = trajectory.sample(np.r_[0.0, intervals[:, 0], trajectory.duration])[0]
+        postures = q[(0 if approach else 1) : q.shape[0] - (0 if retreat else 1)]
+        moves = rest_to_rest_moves(postures, limits.velocity, limits.acceleration, limits.jerk)
+        inner = moves[int(approach) : moves.size - int(retreat)]
+        segments = trajectory.segment_times
+        bound = float(moves.sum())
+        return {
+            "motion_time_s": self.motion_time,
+            "rest_to_rest_s": bound,
+            "ratio": self.motion_time / bound if bound > 0 else 1.0,
+            "between_captures_s": float(np.sum(segments[:, 1] - segments[:, 0])),
+            "between_captures_rest_to_rest_s": float(inner.sum()),
+        }
+
     @property
     def light_directions_camera(self) -> Array:
         """(M, 3) unit vectors from the object to the light at each capture, OpenCV camera frame."""
@@ -117,6 +146,9 @@ class Plan:
             "knot_ik_path_length_rad": joint_path_length(self.knot_ik),
             "duration_s": self.trajectory.duration,
             "motion_time_s": self.motion_time,
+            "controller_waypoints": len(self.waypoints),
+            "torque_peak_fraction": _torque_fractions(self.verification),
+            "motion_bound": self.motion_bound(),
             "verification_passed": self.verification.passed,
             "min_clearance_m": {
                 name: -check.max_value
@@ -151,12 +183,14 @@ class Plan:
         overwrite: bool = False,
         preview: bool = True,
         worker: FigureWorker | None = None,
+        drawn: Mapping[str, Future[bytes]] | None = None,
     ) -> list[Path]:
         """Write the results folder (see :mod:`optlight.report`); refused (VerificationError) when the
         plan failed verification. ``folder`` must be new, empty or, with ``overwrite``, an earlier
         optlight output (the output policy of :mod:`optlight.export`). ``worker`` draws the figures
         in its process while this one writes the rest (:class:`~optlight.viz.drawing.FigureWorker`;
-        the same files). Returns the paths written."""
+        the same files); ``drawn`` are the figures it drew while the plan was solved, by file stem
+        (:attr:`optlight.report.FigureDrafts.figures`), taken as they are. Returns the paths written."""
         summary, writers = self.summary(), []
         figures: dict[str, FigureJob] = {}
         if self.lightset is not None:
@@ -169,31 +203,22 @@ class Plan:
             writers = [files_writer(capture.files, PHOTOMETRIC_STEREO_FOLDER)]
         return save_results(
             folder,
-            setup=self.setup,
-            landmarks=self.landmarks,
-            visited=self.visited,
-            landmark_thetas=self.landmark_thetas,
-            path=self.path,
-            nlp=self.nlp,
-            trajectory=self.trajectory,
-            verification=self.verification,
+            self,
             summary=summary,
-            timings=self.timings,
-            warnings=self.warnings,
-            light_directions_camera=self.light_directions_camera,
             preview=(lambda path: self.preview().save_html(path)) if preview else None,
             overwrite=overwrite,
             extra_figures=figures,
             extra_writers=writers,
             worker=worker,
-            drawn=self.figures,
+            drawn=drawn,
         )
 
     def model_capture(self) -> ModelCapture:
         """The visited lights captured by the model camera, normals recovered, in the DiLiGenT
         layout (:func:`optlight.datasets.model_capture`; ``[lightset]`` dark and saturation levels)."""
-        spec = self.problem.lightset
-        return model_capture(self.scene, self.light_directions_sphere, spec.dark_level, spec.saturation_level)
+        spec, names = self.problem.lightset, image_names(self.problem.trajectory.image_pattern, len(self.visited))
+        # the images keep the names of captures.csv and lights.lp
+        return model_capture(self.scene, self.light_directions_sphere, spec.dark_level, spec.saturation_level, names)
 
     @property
     def light_directions_sphere(self) -> Array:
@@ -206,3 +231,12 @@ class Plan:
 def joint_path_length(theta: Array) -> float:
     """Σ_k |θ_{k+1} − θ_k| (rad) of a (K, n) knot sequence."""
     return float(np.sum(np.linalg.norm(np.diff(theta, axis=0), axis=1)))
+
+
+def _torque_fractions(report: VerificationReport) -> dict[str, float] | None:
+    """Per joint, its peak |τ| along the plan as a fraction of its torque limit; None for a robot
+    without published limits or a report without torques."""
+    torques = report.torques
+    if torques is None or torques.fraction is None:
+        return None
+    return dict(zip(torques.joints, torques.fraction, strict=True))

@@ -1,18 +1,24 @@
 """The results folder of a plan: files, figures, the offline preview and a readable report.
 
-Built from the pieces a solve produces (the setup, the landmark search, the landmarks visited and
-their joint angles, the path, the trajectory NLP, the timed trajectory, the verification), not from
-:class:`~optlight.plan.Plan`, which sits above this module. ``save_results(folder, ...)`` writes, all
-at once or not at all (:func:`optlight.export.write_results`):
+Built from a solved plan as :class:`PlanRecord` sees it (the setup, the landmark search, the landmarks
+visited and their joint angles, the path, the trajectory NLP, the timed trajectory, the verification):
+:class:`~optlight.plan.Plan` is one, and sits above this module. ``save_results(folder, plan, ...)``
+writes, all at once or not at all (:func:`optlight.export.write_results`):
 
 - ``trajectory.csv`` (at ``[trajectory] rate_hz``), ``plan.json``, ``lights.lp`` (relight / PTM light
-  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory), ``captures.csv`` (trigger times);
+  directions), ``joint_trajectory.yaml`` (ROS 2 JointTrajectory: the controller waypoints),
+  ``follow_joint_trajectory_goal.yaml`` (the same as a FollowJointTrajectory goal), ``captures.csv``
+  (trigger times);
 - ``trajectory.png`` (q, q̇, q̈ against the limits), ``path.png`` (the light's path on the sphere),
   ``landmarks_*.png`` (polar plot, histograms, camera images, cost map);
 - ``preview.html`` (Meshcat, opens with no server) and ``report.md`` (the figures and key numbers);
 - for a light set, what :class:`~optlight.plan.Plan` adds: ``photometric_stereo/`` (the DiLiGenT
   layout, :func:`optlight.datasets.model_capture`), ``normal_map.png`` and ``normal_error.png``, and
   with a reachability map (``[lightset] design_over = "reachable"``) ``lightset_reach.png``.
+
+The figures can be drawn while the plan is still being solved: :class:`FigureDrafts` listens to the
+solve's stages (:mod:`optlight.stages`) and hands a worker process each figure as soon as its numbers
+exist.
 """
 
 from __future__ import annotations
@@ -22,18 +28,27 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Future
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.export import write_captures, write_joint_trajectory, write_results
+from optlight.export import (
+    LIGHT_DIRECTION_COLUMNS,
+    LIGHT_FRAME,
+    write_captures,
+    write_joint_trajectory,
+    write_results,
+)
+from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
-from optlight.planning.timing import Trajectory
+from optlight.planning.policy import LandmarkPlacement
 from optlight.planning.trajectory import TrajectoryNLPResult
+from optlight.planning.waypoints import Waypoints
 from optlight.scene import Scene
 from optlight.setup import Setup
+from optlight.stages import OptimizedPath
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob
 from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
@@ -48,17 +63,41 @@ Array = NDArray[np.float64]
 RESULTS_DPI = 120
 
 
-def plan_dict(
-    setup: Setup,
-    landmarks: LandmarkSet,
-    visited: Sequence[Landmark],
-    landmark_thetas: Array,
-    path: LightPath,
-    nlp: TrajectoryNLPResult,
-    summary: Mapping[str, Any],
-    warnings: Sequence[str],
-) -> dict[str, Any]:
-    """What plan.json records besides the trajectory and the verification (which export adds)."""
+class PlanRecord(Protocol):
+    """What the results folder reads of a solved plan (:class:`~optlight.plan.Plan` is one: see its
+    fields)."""
+
+    @property
+    def setup(self) -> Setup: ...
+    @property
+    def landmarks(self) -> LandmarkSet: ...
+    @property
+    def visited(self) -> Sequence[Landmark]: ...
+    @property
+    def landmark_thetas(self) -> Array: ...
+    @property
+    def path(self) -> LightPath: ...
+    @property
+    def nlp(self) -> TrajectoryNLPResult: ...
+    @property
+    def trajectory(self) -> Trajectory: ...
+    @property
+    def waypoints(self) -> Waypoints: ...
+    @property
+    def verification(self) -> VerificationReport: ...
+    @property
+    def timings(self) -> Mapping[str, float]: ...
+    @property
+    def warnings(self) -> Sequence[str]: ...
+    @property
+    def light_directions_camera(self) -> Array: ...
+
+
+def plan_dict(plan: PlanRecord, summary: Mapping[str, Any]) -> dict[str, Any]:
+    """What plan.json records of ``plan`` besides the trajectory and the verification (which export
+    adds); ``summary`` its key numbers."""
+    setup, landmarks, visited, warnings = plan.setup, plan.landmarks, plan.visited, plan.warnings
+    landmark_thetas, path, nlp = plan.landmark_thetas, plan.path, plan.nlp
     problem, robot, spec = setup.problem, setup.robot, setup.problem.robot
     return {
         "problem": problem.to_dict(),
@@ -115,15 +154,10 @@ def plan_dict(
     }
 
 
-def report_markdown(
-    setup: Setup,
-    summary: Mapping[str, Any],
-    timings: Mapping[str, float],
-    verification: VerificationReport,
-    warnings: Sequence[str],
-    figures: Sequence[str],
-) -> str:
-    """report.md: what was solved, the key numbers, the verification and the figures."""
+def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Sequence[str]) -> str:
+    """report.md of ``plan``: what was solved, the key numbers (``summary``), the verification and the
+    ``figures`` (PNG file names)."""
+    setup, timings, verification, warnings = plan.setup, plan.timings, plan.verification, plan.warnings
     s, t = summary, timings
     view = setup.problem.view
     protected = (
@@ -158,8 +192,13 @@ def report_markdown(
         f"| joint path length (NLP / per-knot IK) | {s['joint_path_length_rad']:.3f} rad / "
         f"{s['knot_ik_path_length_rad']:.3f} rad |",
         f"| duration (motion + dwells) | {s['duration_s']:.2f} s ({s['motion_time_s']:.2f} s moving) |",
+        f"| moving time / rest-to-rest bound (time-optimal stops at the same postures) | "
+        f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['rest_to_rest_s']:.2f} s "
+        f"({s['motion_bound']['ratio']:.2f}×) |",
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
+        f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
+        f"| peak joint torque / limit (the lamp {setup.problem.light.mass_kg:g} kg) | {_torque_text(verification)} |",
         f"| verification | {'passed' if s['verification_passed'] else 'FAILED'} |",
         "",
         "## Time per stage",
@@ -179,9 +218,34 @@ def report_markdown(
         lines += _lightset_lines(s["lightset"])
     if warnings:
         lines += ["## Warnings", "", *(f"- {w}" for w in warnings), ""]
+    holders = f"captures.csv's `{'`, `'.join(LIGHT_DIRECTION_COLUMNS)}`, `lights.lp`"
+    if "lightset" in s:
+        holders += ", the DiLiGenT folder's `light_directions.txt`"
+    lines += [
+        "## Files and frames",
+        "",
+        "- `joint_trajectory.yaml` (ROS 2 JointTrajectory) and `trajectory.csv`: the motion; "
+        "`captures.csv`: per capture the camera trigger (`trigger_s`), the image name, the light's "
+        "`zenith_deg` and `azimuth_deg` (the angles `optlight render --zenith --azimuth` takes), its "
+        "direction, its position (`light_position_*_m`, world frame, m) and the joint angles.",
+        f"- Light directions ({holders}): {LIGHT_FRAME}.",
+        "- Image names: the same in every file that names the images.",
+        "",
+    ]
     lines += ["## Figures", ""]
     lines += [f"![{Path(f).stem}]({f})\n" for f in figures]
     return "\n".join(lines)
+
+
+def _torque_text(verification: VerificationReport) -> str:
+    """The largest fraction of a torque limit a joint reaches, and which; or why none is checked."""
+    torques = verification.torques
+    if torques is None:
+        return "not computed"
+    if torques.fraction is None:
+        return f"not checked: {torques.source}"
+    j = max(range(len(torques.joints)), key=lambda i: torques.fraction[i] if torques.fraction else 0.0)
+    return f"{torques.fraction[j]:.0%} ({torques.joints[j]}; every joint under Verification)"
 
 
 def _lightset_lines(lightset: Mapping[str, Any]) -> list[str]:
@@ -274,19 +338,9 @@ def _png_source(job: FigureJob, worker: FigureWorker | None) -> Callable[[], byt
 
 def save_results(
     folder: str | Path,
+    plan: PlanRecord,
     *,
-    setup: Setup,
-    landmarks: LandmarkSet,
-    visited: Sequence[Landmark],
-    landmark_thetas: Array,
-    path: LightPath,
-    nlp: TrajectoryNLPResult,
-    trajectory: Trajectory,
-    verification: VerificationReport,
     summary: Mapping[str, Any],
-    timings: Mapping[str, float],
-    warnings: Sequence[str],
-    light_directions_camera: Array,
     preview: Callable[[Path], Path] | None = None,
     overwrite: bool = False,
     extra_figures: Mapping[str, FigureJob] | None = None,
@@ -294,14 +348,18 @@ def save_results(
     worker: FigureWorker | None = None,
     drawn: Mapping[str, Future[bytes]] | None = None,
 ) -> list[Path]:
-    """Write the results folder of a verified plan (see the module docstring); returns the paths.
-    ``preview(path)`` writes ``preview.html`` (left out when None); ``extra_figures`` and
-    ``extra_writers`` add figures and files (a light set's photometric-stereo folder); ``worker``
-    draws the figures while the rest is written (:mod:`optlight.viz.drawing`), else they are drawn
-    here; ``drawn`` are figures a worker drew (or is drawing) already, by file stem.
+    """Write the results folder of a verified ``plan`` (see the module docstring), with its key
+    numbers ``summary``; returns the paths. ``preview(path)`` writes ``preview.html`` (left out when
+    None); ``extra_figures`` and ``extra_writers`` add figures and files (a light set's
+    photometric-stereo folder); ``worker`` draws the figures while the rest is written
+    (:mod:`optlight.viz.drawing`), else they are drawn here; ``drawn`` are figures a worker drew (or
+    is drawing) already, by file stem (:attr:`FigureDrafts.figures`).
 
     ``folder`` must be new, empty, or (with ``overwrite``) an earlier optlight output, of which only
     the files optlight wrote are replaced (the output policy of :mod:`optlight.export`)."""
+    setup, landmarks, visited, nlp = plan.setup, plan.landmarks, plan.visited, plan.nlp
+    trajectory, waypoints, verification = plan.trajectory, plan.waypoints, plan.verification
+    light_directions_camera = plan.light_directions_camera
     robot = setup.robot
     drawn = {name: png for name, png in (drawn or {}).items() if not png.cancelled()}
     # the landmark jobs only when one is not drawn: making the contact sheet's renders its images
@@ -321,14 +379,13 @@ def save_results(
     def report(folder: Path) -> list[Path]:
         names = sorted(f"{name}.png" for name in sources)
         out = folder / "report.md"
-        out.write_text(report_markdown(setup, summary, timings, verification, warnings, names))
+        out.write_text(report_markdown(plan, summary, names))
         return [out]
 
     traj_spec = setup.trajectory_spec
 
     def joint_trajectory(folder: Path) -> list[Path]:
-        out = folder / "joint_trajectory.yaml"
-        return [write_joint_trajectory(out, trajectory, robot.joint_names, traj_spec.rate_hz)]
+        return write_joint_trajectory(folder, waypoints, robot.joint_names)
 
     def captures(folder: Path) -> list[Path]:
         return [
@@ -339,6 +396,7 @@ def save_results(
                 image_pattern=traj_spec.image_pattern,
                 light_directions_camera=light_directions_camera,
                 light_positions=np.array([lm.position for lm in visited]),
+                light_angles_deg=np.rad2deg([(lm.zenith, lm.azimuth) for lm in visited]).reshape(-1, 2),
                 joint_names=robot.joint_names,
             )
         ]
@@ -354,7 +412,7 @@ def save_results(
         folder,
         trajectory=trajectory,
         report=verification,
-        plan_dict=plan_dict(setup, landmarks, visited, landmark_thetas, path, nlp, summary, warnings),
+        plan_dict=plan_dict(plan, summary),
         joint_names=robot.joint_names,
         light_directions_camera=light_directions_camera,
         image_pattern=setup.trajectory_spec.image_pattern,
@@ -363,3 +421,38 @@ def save_results(
         overwrite=overwrite,
         csv_rate_hz=traj_spec.rate_hz,
     )
+
+
+class FigureDrafts:
+    """A stage listener (:data:`optlight.stages.StageListener`: ``solve(..., on_stage=drafts)``)
+    that hands ``worker`` the results folder's figures as soon as their numbers exist: the landmark
+    figures once the captures are placed (drawn while the motion is planned), the trajectory and path
+    figures once the motion is timed (drawn while it is verified and the rest is written).
+    :attr:`figures`, by file stem, go to :meth:`~optlight.plan.Plan.save` (``drawn=``), which takes
+    them as they are: the same figures :func:`save_results` would draw."""
+
+    def __init__(self, worker: FigureWorker) -> None:
+        self.worker = worker
+        self.figures: dict[str, Future[bytes]] = {}
+        self._setup: Setup | None = None
+        self._landmarks: LandmarkSet | None = None
+        self._knots: OptimizedPath | None = None
+
+    def __call__(self, stage: str, result: object) -> None:
+        """Hear that ``stage`` finished with ``result`` (the table of :mod:`optlight.stages`)."""
+        match result:
+            case Setup():
+                self._setup = result
+            case LandmarkSet():
+                self._landmarks = result
+            case LandmarkPlacement():
+                assert self._setup is not None and self._landmarks is not None, "scene and landmarks first"
+                self._draw(landmark_jobs(self._landmarks, self._setup.scene, result.landmarks))
+            case OptimizedPath():
+                self._knots = result
+            case Trajectory():
+                assert self._setup is not None and self._knots is not None, "scene and nlp first"
+                self._draw(motion_jobs(self._setup, self._knots.visited, self._knots.nlp.theta, result))
+
+    def _draw(self, jobs: Mapping[str, FigureJob]) -> None:
+        self.figures |= {name: self.worker.draw(job) for name, job in jobs.items()}

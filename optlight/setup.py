@@ -7,7 +7,8 @@
   (the landmark search and the placement NLP), the two sharing the object;
 - the objectives on both scenes (``objective``, ``search_objective``), with their reference;
 - the robot, and the ``limits`` a plan must keep (its URDF velocity limits times ``[robot]
-  velocity_scale``);
+  velocity_scale``), and its ``dynamics`` with the lamp (``[light] mass_kg``, ``com_m``), whose joint
+  torques the verification checks against the robot's torque limits;
 - the environment: obstacles and self-collision when ``[environment] enabled``, the camera's view
   (``[view]``) unless it is off; its CasADi clearance and view functions are built on first use and
   kept by the environment;
@@ -42,7 +43,7 @@ from optlight.environment import CAPTURE_SLACK, LIGHT, Environment
 from optlight.errors import ProblemError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
-from optlight.robot import Robot, ik_settings, load_robot
+from optlight.robot import Dynamics, Lamp, Robot, ik_settings, load_robot
 from optlight.scene import Scene
 from optlight.spec import (
     EnvironmentSpec,
@@ -51,7 +52,9 @@ from optlight.spec import (
     SolverSpec,
     TrajectorySpec,
     check_memory,
+    check_trajectory_size,
     load_problem,
+    planned_captures,
 )
 
 Array = NDArray[np.float64]
@@ -96,6 +99,7 @@ class Setup:
     ik: Mapping[str, Any]
     start: Array
     view_zenith: float
+    dynamics: Dynamics
 
     @classmethod
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
@@ -109,6 +113,16 @@ class Setup:
             objective if search_scene is scene else Objective.from_problem(problem, search_scene)
         )
         robot = load_robot(problem)
+        limits = MotionLimits.of(robot, problem.robot.velocity_scale)
+        check_trajectory_size(
+            problem,
+            joints=robot.n,
+            reach_m=reach_bound(robot),
+            velocity=limits.velocity,
+            acceleration=limits.acceleration,
+            jerk=limits.jerk,
+            captures=planned_captures(problem),
+        )
         environment = (
             Environment.from_problem(problem, scene.mesh.vertices)
             if problem.environment.enabled or problem.view.mode != "off"
@@ -122,11 +136,12 @@ class Setup:
             objective=objective,
             search_objective=search_objective,
             robot=robot,
-            limits=MotionLimits.of(robot, problem.robot.velocity_scale),
+            limits=limits,
             environment=environment,
             ik=MappingProxyType(ik_settings(problem.solver)),
             start=start,
             view_zenith=view_zenith(problem, scene.sphere, environment, robot),
+            dynamics=Dynamics(robot, lamp_of(problem)),
         )
 
     @property
@@ -161,6 +176,34 @@ class Setup:
     def file(self) -> str:
         """The problem file's path for error messages ("<inline>" for a problem built in code)."""
         return str(self.problem.source) if self.problem.source else "<inline>"
+
+
+def reach_bound(robot: Robot) -> float:
+    """An upper bound R (m) of the distance from any joint's axis to the light, whatever the joint
+    angles: the lengths of the joint placements after the first joint and the light's placement in its
+    joint, added up along the chain, with each prismatic joint's longest stroke. A joint of speed q̇
+    moves the light by at most |q̇| R (revolute) or |q̇| (prismatic, counted as R ≥ 1 m)."""
+    model = robot.model
+    frame = model.frames[robot.light_frame_id]
+    total = float(np.linalg.norm(frame.placement.translation))
+    chain = []
+    joint = frame.parentJoint
+    while joint > 0:
+        chain.append(joint)
+        joint = model.parents[joint]
+    for j in chain[:-1]:  # the first joint's own placement does not move with any joint
+        total += float(np.linalg.norm(model.jointPlacements[j].translation))
+    for j in chain:
+        if "P" in model.joints[j].shortname().removeprefix("JointModel"):
+            q = model.joints[j].idx_q
+            total += float(max(abs(model.lowerPositionLimit[q]), abs(model.upperPositionLimit[q])))
+    return max(total, 1.0)
+
+
+def lamp_of(problem: Problem) -> Lamp:
+    """The lamp of ``[light]`` as a rigid body: ``mass_kg``, ``com_m`` and the housing's cylinder."""
+    light = problem.light
+    return Lamp(light.mass_kg, light.com_m, light.housing_radius_m, light.housing_length_m)
 
 
 def _search_scene(scene: Scene, resolution: int) -> Scene:
@@ -299,7 +342,7 @@ def _start_configuration(problem: Problem, robot: Robot, environment: Environmen
                 list(value),
             )
     if environment is not None and environment.collisions:
-        clearance, _ = environment.sphere_clearance(robot, theta)
+        clearance, _ = environment.sphere_clearance(robot, theta, beam=False)
         worst = environment.clearance_labels(robot)[int(np.argmin(clearance))] if clearance.size else ""
         if clearance.size and clearance.min() < 0.0:
             raise ProblemError(

@@ -5,7 +5,7 @@ range and a one-line description; :func:`load_problem` checks a file against the
 ``python -m optlight.spec`` writes the reference (``docs/problems.md``) from them, so the code and
 the documentation cannot drift apart.
 
-Conventions (DESIGN §2): metres and degrees in files (keys end in ``_m`` / ``_deg``), radians in
+Conventions (docs/design.md §2): metres and degrees in files (keys end in ``_m`` / ``_deg``), radians in
 code. Paths inside a file are relative to that file.
 """
 
@@ -28,6 +28,15 @@ Vec3 = tuple[float, float, float]
 
 #: Robots that load by name (example-robot-data); :mod:`optlight.robot.loading` has their details.
 ROBOT_NAMES: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
+
+#: Largest seed of a random generator: NumPy's and Mitsuba's (a 32-bit sample seed, offset per capture).
+SEED_MAX = 2**31 - 1
+#: Largest IPOPT or generalized-IK iteration cap: one unreachable pose at 10⁴ IK iterations already
+#: costs a second, and a plan solves hundreds of them.
+MAX_ITERATIONS = 10_000
+#: Camera responses ``[world] gamma`` may have: real ones are 1–2.4; at 1/10 or 10 every capture is all
+#: but black or white.
+GAMMA_RANGE = (0.1, 10.0)
 
 #: Folder of the built-in problem files and their data, shipped inside the package (the
 #: repository's top-level ``problems/`` points here).
@@ -80,7 +89,7 @@ class FaceSpec:
 @dataclass(frozen=True)
 class ObjectSpec:
     """The observed object. Its frame is the light-sphere frame S at the centre O: +z towards the
-    camera, +y up (DESIGN §2), so a mesh's front is its +z side and its top is +y."""
+    camera, +y up (docs/design.md §2), so a mesh's front is its +z side and its top is +y."""
 
     kind: Literal["face", "sphere", "mesh"] = key("face", "what the camera looks at")
     center_m: Vec3 = key((0.5, 0.0, 0.4), "object centre O in the world frame", unit="m")
@@ -132,7 +141,7 @@ class LightSphereSpec:
 
 @dataclass(frozen=True)
 class LightSpec:
-    """Lambertian light model (DESIGN §4): I = clip(gain·ρ(E·v·max(0, n·l)·falloff + ambient))."""
+    """Lambertian light model (docs/design.md §4): I = clip(gain·ρ(E·v·max(0, n·l)·falloff + ambient))."""
 
     model: Literal["directional", "point"] = key(
         "directional", "directional light, or point light with (b/r)² falloff"
@@ -143,7 +152,7 @@ class LightSpec:
     saturation: float = key(1.0, "pixel value where the sensor saturates (clip level)", lo=0.0, lo_open=True)
     cast_shadows: bool = key(True, "trace shadow rays (the differentiable model uses them as a fixed mask)")
     noise_std: float = key(0.0, "standard deviation of additive Gaussian sensor noise", lo=0.0)
-    seed: int = key(0, "seed of the sensor noise")
+    seed: int = key(0, "seed of the sensor noise", lo=0, hi=SEED_MAX)
     softplus_sharpness: float = key(
         60.0, "β of the smooth max(0, n·l) in the differentiable model", lo=0.0, lo_open=True
     )
@@ -159,6 +168,19 @@ class LightSpec:
     )
     housing_length_m: float = key(
         0.06, "length of a cylindrical housing along the light's −z", unit="m", lo=0.0, lo_open=True
+    )
+    mass_kg: float = key(
+        0.3,
+        "mass of the lamp the flange carries, for the joint torques (default: a small LED head, assumed "
+        "0.3 kg for an LED, its heat sink and driver in the 60 mm housing; weigh yours)",
+        unit="kg",
+        lo=0.0,
+    )
+    com_m: Vec3 = key(
+        (0.0, 0.0, 0.04),
+        "the lamp's centre of mass in the flange frame (default: assumed 0.04 m out along the tool axis, "
+        "the middle of a lamp that long; its rotational inertia is a solid cylinder of the housing's size)",
+        unit="m",
     )
 
 
@@ -241,6 +263,11 @@ class ReferenceSpec:
     azimuth_deg: float = key(0.0, "reference light azimuth (kind = light)", unit="deg")
     image: str | None = key(None, "reference image, PNG or NPY (kind = image)")
     mask: str | None = key(None, "mask image of the pixels to compare, non-zero = used (kind = image)")
+    resize: bool = key(
+        False,
+        "resize an image or mask of another size than the camera's to it (bilinear; nearest for the mask); "
+        "false: such a file is refused",
+    )
     bins: tuple[float, ...] | None = key(
         None, "reference histogram (kind = bins), renormalised to sum 1", lo=0.0
     )
@@ -277,11 +304,10 @@ class LandmarksSpec:
     )
     sweep_step_deg: float = key(
         2.0,
-        "zenith step of the coarse sweep that seeds the refinement",
+        "zenith step of the coarse sweep that seeds the refinement (a finer sweep only multiplies the renders)",
         unit="deg",
-        lo=0.0,
+        lo=0.1,
         hi=45.0,
-        lo_open=True,
     )
     seeds: int = key(3, "sweep minima refined by IPOPT per azimuth", lo=1, hi=50)
     resolution: int = key(
@@ -302,21 +328,25 @@ class LandmarksSpec:
 
 @dataclass(frozen=True)
 class TrajectorySpec:
-    """How the robot gets there (DESIGN §6)."""
+    """How the robot gets there (docs/design.md §6)."""
 
     order: Literal["azimuth", "tour"] = key(
         "azimuth", "visit the landmarks in azimuth order, or a shorter tour in joint space"
     )
     path: Literal["arc", "free"] = key("arc", "keep the light on great-circle arcs, or only on the sphere")
     knot_spacing_deg: float = key(
-        2.0, "largest angle between two path knots", unit="deg", lo=0.0, hi=30.0, lo_open=True
+        2.0,
+        "largest angle between two path knots (finer knots only multiply the trajectory NLP's variables)",
+        unit="deg",
+        lo=0.1,
+        hi=30.0,
     )
     max_step_rad: float = key(0.25, "largest joint step between two knots", unit="rad", lo=0.0, lo_open=True)
     dwell_s: float = key(0.5, "time the light stays still at each landmark (exposure)", unit="s", lo=0.0)
     image_pattern: str = key(
         "img_{index:03d}.png",
         "image file names written into lights.lp and captures.csv: a Python format string of {index} "
-        "(0, 1, …) giving distinct names without whitespace",
+        "(0, 1, …) giving distinct names without whitespace, path separators or ..",
     )
     timing: Literal["jerk_limited", "toppra"] = key(
         "jerk_limited",
@@ -325,8 +355,8 @@ class TrajectorySpec:
     )
     rate_hz: float = key(
         1000.0,
-        "controller rate: trajectory.csv and joint_trajectory.yaml are sampled at it, the acceleration "
-        "continuity is checked at it",
+        "controller rate: trajectory.csv is sampled at it (joint_trajectory.yaml holds the waypoints "
+        "chosen on its grid), the acceleration continuity is checked at it",
         unit="Hz",
         lo=0.0,
         lo_open=True,
@@ -344,10 +374,16 @@ class TrajectorySpec:
 class SolverSpec:
     """Numerical settings shared by the NLPs and the IK."""
 
-    max_iter: int = key(300, "IPOPT iteration limit", lo=1)
+    max_iter: int = key(
+        300, "IPOPT iteration limit (a higher cap only delays the report of an NLP that does not converge)",
+        lo=1, hi=MAX_ITERATIONS,
+    )
     tol: float = key(1e-8, "IPOPT tolerance", lo=0.0, lo_open=True)
     ik_damping: float = key(1e-6, "damping λ² of the pseudoinverse J# = Jᵀ(JJᵀ + λ²I)⁻¹", lo=0.0)
-    ik_max_iter: int = key(200, "generalized IK iteration limit", lo=1)
+    ik_max_iter: int = key(
+        200, "generalized IK iteration limit (a higher cap only delays the report of an unreachable pose)",
+        lo=1, hi=MAX_ITERATIONS,
+    )
     ik_tol: float = key(1e-9, "generalized IK residual tolerance (squared norm)", lo=0.0, lo_open=True)
     ik_max_step_rad: float = key(
         0.8, "largest joint change in one generalized IK iteration", unit="rad", lo=0.0, lo_open=True
@@ -462,7 +498,7 @@ class ViewSpec:
 
 @dataclass(frozen=True)
 class LightSetSpec:
-    """A set of N lights scored together (DESIGN §10) instead of landmarks matched one by one:
+    """A set of N lights scored together (docs/design.md §10) instead of landmarks matched one by one:
     photometric stereo (the expected normal error of the set), RTI (even coverage of the cap) or a
     given grid (a face database's directions, each mapped to the nearest allowed light). Off
     (kind = "none") by default."""
@@ -473,7 +509,7 @@ class LightSetSpec:
     )
     count: int = key(12, "number N of lights (photometric_stereo: at least 3; rti: at least 2)", lo=1, hi=720)
     starts: int = key(8, "random starts of the set design, uniform on the cap", lo=1, hi=1000)
-    seed: int = key(0, "seed of the random starts")
+    seed: int = key(0, "seed of the random starts", lo=0, hi=SEED_MAX)
     regularization: float = key(
         1e-2,
         "ε of the per-pixel M + εI (photometric_stereo): a pixel lit by fewer than 3 lights costs ~1/ε",
@@ -530,24 +566,31 @@ class LightSetSpec:
     )
     candidate_spacing_deg: float = key(
         2.0,
-        "spacing of the candidate lights a grid direction may be replaced by",
+        "spacing of the candidate lights a grid direction may be replaced by (their count grows as its "
+        "inverse square)",
         unit="deg",
-        lo=0.0,
+        lo=0.5,
         hi=30.0,
-        lo_open=True,
     )
 
 
 @dataclass(frozen=True)
 class WorldSpec:
-    """How the real scene differs from the model (DESIGN §11): what the model and physically based
+    """How the real scene differs from the model (docs/design.md §11): what the model and physically based
     cameras of the camera-in-the-loop capture (:mod:`optlight.capture`), never what the planner
     assumes. Every default is the model itself (a Lambertian object, the exact light, no
     inter-reflection, a linear camera without noise)."""
 
-    power_scale: float = key(1.0, "real light power over the model's light.power", lo=0.0)
+    power_scale: float = key(
+        1.0,
+        "real light power over the model's light.power (0 would leave every capture unlit)",
+        lo=0.0,
+        lo_open=True,
+    )
     ambient: float | None = key(None, "real ambient k_amb (default: the model's light.ambient)", lo=0.0)
-    albedo_scale: float = key(1.0, "factor on the model's albedo", lo=0.0)
+    albedo_scale: float = key(
+        1.0, "factor on the model's albedo (0 would make every capture black)", lo=0.0, lo_open=True
+    )
     albedo_texture: float = key(
         0.0, "relative amplitude of a multiplicative albedo texture, 1 + t·sin·sin·sin of the position", lo=0.0, hi=1.0
     )
@@ -560,7 +603,10 @@ class WorldSpec:
         0.5, "specular strength (roughplastic specular reflectance, principled specular)", lo=0.0, hi=1.0
     )
     light_offset_m: Vec3 = key(
-        (0.0, 0.0, 0.0), "where the real light is, relative to where the robot puts it (world frame)", unit="m"
+        (0.0, 0.0, 0.0),
+        "where the real light is, relative to where the robot puts it (world frame); shorter than the light "
+        "sphere's radius",
+        unit="m",
     )
     light_radius_m: float = key(
         0.0, "radius of the real light's emitting area (0: a point; the physically based camera)", unit="m", lo=0.0
@@ -573,9 +619,19 @@ class WorldSpec:
     spot_cutoff_deg: float = key(
         40.0, "half-angle where the spot beam ends (light_profile = spot)", unit="deg", lo=0.0, hi=90.0, lo_open=True
     )
-    gamma: float = key(1.0, "camera response: recorded value s·(I/s)^(1/gamma)", lo=0.0, lo_open=True)
-    noise_std: float = key(0.0, "sensor noise σ, pixel units, added before the response", lo=0.0)
-    seed: int = key(0, "seed of the sensor noise and of the physically based camera's samples")
+    gamma: float = key(
+        1.0,
+        "camera response: recorded value s·(I/s)^(1/gamma) (beyond the range every capture is nearly "
+        "black or white)",
+        lo=GAMMA_RANGE[0],
+        hi=GAMMA_RANGE[1],
+    )
+    noise_std: float = key(
+        0.0, "sensor noise σ, pixel units, added before the response (at most light.saturation)", lo=0.0
+    )
+    seed: int = key(
+        0, "seed of the sensor noise and of the physically based camera's samples", lo=0, hi=SEED_MAX
+    )
     bounces: int = key(
         1, "light bounces the physically based camera traces (1: direct light only; more: inter-reflections)", lo=1, hi=32
     )
@@ -584,7 +640,7 @@ class WorldSpec:
 
 @dataclass(frozen=True)
 class LoopSpec:
-    """The camera in the loop (DESIGN §11): plan, capture at the landmarks, calibrate the model from
+    """The camera in the loop (docs/design.md §11): plan, capture at the landmarks, calibrate the model from
     the captures, re-plan on the calibrated model, until the measured objective stops improving."""
 
     iterations: int = key(4, "most plan-capture-calibrate rounds (the first is the open-loop plan)", lo=1, hi=50)
@@ -665,7 +721,8 @@ class Problem:
 
 def image_names(pattern: str, count: int) -> list[str]:
     """``pattern.format(index=i)`` for i = 0 … count−1; names must be distinct and free of whitespace
-    (lights.lp separates fields by spaces). Raises ValueError saying what is wrong."""
+    (lights.lp separates fields by spaces), and each a file name in the dataset's own folder (no path
+    separator, no ``..``). Raises ValueError saying what is wrong."""
     try:
         names = [pattern.format(index=i) for i in range(count)]
     except (KeyError, IndexError, ValueError, AttributeError, TypeError) as e:
@@ -675,15 +732,20 @@ def image_names(pattern: str, count: int) -> list[str]:
     bad = [n for n in names if not n or any(c.isspace() for c in n)]
     if bad:
         raise ValueError(f"image names may not be empty or contain whitespace (.lp format): {bad[0]!r}")
+    outside = [n for n in names if any(c in n for c in "/\\") or ".." in n or n.startswith("~")]
+    if outside:
+        raise ValueError(
+            f"an image name is a file in the dataset's folder, without / \\ or ..: {outside[0]!r}"
+        )
     return names
 
 
 #: Peak memory of a solve: a fixed part (the libraries, the robot, the NLPs; ~250 MB over the
 #: imports) plus a part per object pixel at the camera's resolution (rays, G-buffer, images). Whole
-#: solves of the default problem grew by ~800 bytes per pixel at 256²–1024² when measured two stops
-#: ago, ~80 at 128²–320² now; the constant keeps the larger (temporaries of the G-buffer's rays grow
-#: with the image). The soft histogram no longer adds bytes per pixel and bin: its NumPy kernel runs
-#: in chunks of fixed size (0.9 byte per pixel and bin measured, 32 → 128 bins at 320²; it was 72).
+#: solves of the default problem grow by ~80 bytes per pixel at 128²–320² and by up to ~800 at
+#: 256²–1024²; the constant keeps the larger (temporaries of the G-buffer's rays grow with the
+#: image). The soft histogram adds almost nothing per pixel and bin: its NumPy kernel runs in chunks
+#: of fixed size (~1 byte per pixel and bin, 32 → 128 bins at 320²).
 #: Every image pixel is counted as an object pixel, since the object may fill the image.
 MEMORY_BASE_BYTES = 600e6
 MEMORY_BYTES_PER_PIXEL = 1200.0
@@ -733,6 +795,176 @@ def check_memory(problem: Problem) -> None:
         f"pixels with {problem.objective.bins} objective.bins needs about {need / 1e9:.1f} GB, "
         f"{available / 1e9:.1f} GB is available; lower camera.width and camera.height",
         cam.width,
+    )
+
+
+#: Bytes a sampled trajectory holds per sample and joint in its largest writer: the text of
+#: joint_trajectory.yaml (~210 B per sample and joint measured with 7 joints; trajectory.csv's rows
+#: ~175 B, the verification's arrays ~120 B, each one at a time).
+SAMPLE_BYTES_PER_JOINT = 250.0
+
+
+def planned_captures(problem: Problem) -> int:
+    """The captures a plan of ``problem`` is planned with: ``[lightset] count`` for a designed set,
+    the grid's length for a grid (``grid_deg``'s pairs, a ``grid_file``'s lines that are neither
+    blank, comments nor its header; the 64 Yale B directions by default), else ``[landmarks] count``
+    (landmarks that merge make fewer)."""
+    ls = problem.lightset
+    if ls.kind == "grid":
+        if ls.grid_deg is not None:
+            return len(ls.grid_deg)
+        if ls.grid_file is None:
+            return 64
+        try:
+            lines = problem.resolve(ls.grid_file).read_text().splitlines()
+        except (OSError, UnicodeDecodeError):
+            return 1  # the grid's reader names the file and the key
+        return max(sum(1 for s in lines if s.strip() and not s.lstrip().startswith("#")) - 1, 1)
+    return ls.count if ls.kind != "none" else problem.landmarks.count
+
+
+def trajectory_samples_budget(problem: Problem, joints: int) -> float | None:
+    """The most samples (:data:`SAMPLE_BYTES_PER_JOINT` × ``joints`` bytes each) the trajectory's
+    writers can hold in :data:`MEMORY_SAFETY` of the memory available now, beside the solve's own
+    (:func:`estimated_peak_memory`); None where the available memory is unknown."""
+    available = available_memory()
+    if available is None:
+        return None
+    free = MEMORY_SAFETY * available - estimated_peak_memory(problem)
+    return max(free, 0.0) / (SAMPLE_BYTES_PER_JOINT * joints)
+
+
+def sample_rate(problem: Problem) -> float:
+    """Samples per second of the motion (Hz): ``[trajectory] rate_hz`` for the exports, at least 1 kHz
+    for the verification."""
+    return max(problem.trajectory.rate_hz, 1000.0)
+
+
+def least_move_time(
+    distance_m: float,
+    reach_m: float,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray | None,
+) -> tuple[float, str]:
+    """A lower bound (s) of the time of a rest-to-rest move that carries the light ``distance_m``, and
+    the key of the limit that sets it (``robot.velocity_scale``, ``robot.acceleration_limit`` or
+    ``robot.jerk_limit``).
+
+    The light's speed is at most Σ_j |q̇_j| R (``reach_m`` = R ≥ the distance from any joint axis to
+    the light), so d ≤ R Σ_j ∫|q̇_j| dt, and over a move of time T from rest to rest each joint
+    travels ∫|q̇_j| dt ≤ v_j T, ≤ a_j T²/4 and, starting and ending with q̈ = 0 (jerk-limited
+    timing), ≤ j_j T³/24. Hence T ≥ max(d / (R Σv), 2 √(d / (R Σa)), ∛(24 d / (R Σj)))."""
+    x = distance_m / reach_m
+    times = {
+        "robot.velocity_scale": x / float(np.sum(velocity)),
+        "robot.acceleration_limit": 2.0 * math.sqrt(x / float(np.sum(acceleration))),
+    }
+    if jerk is not None:
+        times["robot.jerk_limit"] = (24.0 * x / float(np.sum(jerk))) ** (1.0 / 3.0)
+    limit = max(times, key=lambda k: times[k])
+    return times[limit], limit
+
+
+def check_trajectory_size(
+    problem: Problem,
+    *,
+    joints: int,
+    reach_m: float,
+    velocity: np.ndarray,
+    acceleration: np.ndarray,
+    jerk: np.ndarray,
+    captures: int,
+) -> None:
+    """Raise :class:`ProblemError` when the sampled trajectory cannot fit in this machine's memory
+    (:func:`trajectory_samples_budget`), by a lower estimate of its duration made before any work:
+    ``captures`` dwells of ``dwell_s`` and ``captures − 1`` moves between captures at least
+    ``[landmarks] distinct_deg`` apart on the light sphere, each at least :func:`least_move_time`
+    under the robot's limits (``velocity`` already scaled by ``velocity_scale``). The refusal names the
+    key that makes the trajectory too long (``rate_hz``, ``dwell_s`` or a motion limit) and the
+    largest (or smallest) value this machine can do. Unchecked where the available memory is unknown.
+    Like :func:`check_memory`, a check of this machine, run where the problem is built."""
+    budget = trajectory_samples_budget(problem, joints)
+    if budget is None:
+        return
+    traj, rate = problem.trajectory, sample_rate(problem)
+    angle = math.radians(problem.landmarks.distinct_deg)
+    distance = 2.0 * problem.light_sphere.radius_m * math.sin(angle / 2.0)
+    jerk_used = jerk if traj.timing == "jerk_limited" else None
+    move, limit = least_move_time(distance, reach_m, velocity, acceleration, jerk_used)
+    moves = max(captures - 1, 0)
+    dwell = captures * traj.dwell_s
+    duration = dwell + moves * move
+    if duration * rate <= budget:
+        return
+    file = str(problem.source) if problem.source else "<inline>"
+    need = duration * rate * SAMPLE_BYTES_PER_JOINT * joints
+    why = (
+        f"a trajectory of at least {duration:.3g} s ({captures} captures × dwell_s {traj.dwell_s:g} s, "
+        f"{moves} moves of at least {move:.3g} s) sampled at {rate:g} Hz needs {need / 1e9:.3g} GB for "
+        f"its {joints}-joint samples, {budget * SAMPLE_BYTES_PER_JOINT * joints / 1e9:.3g} GB is free here"
+    )
+    seconds = budget / rate  # the longest trajectory this machine can sample at this rate
+    if traj.rate_hz > 1000.0 and duration * 1000.0 <= budget:
+        expected = f"a value ≤ {budget / duration:.3g} Hz on this machine: {why}"
+        raise ProblemError(file, "trajectory.rate_hz", expected, traj.rate_hz)
+    if dwell >= duration - dwell or seconds <= dwell:
+        if captures > 0 and seconds > moves * move:
+            largest = (seconds - moves * move) / captures
+            expected = f"a value ≤ {largest:.3g} s on this machine: {why}"
+            raise ProblemError(file, "trajectory.dwell_s", expected, traj.dwell_s)
+        raise ProblemError(file, "trajectory.dwell_s", f"a shorter dwell: {why}", traj.dwell_s)
+    per_move = (seconds - dwell) / moves  # the time a move may take
+    ratio = move / per_move  # > 1: how much faster the moves must be
+    value: object
+    if limit == "robot.velocity_scale":
+        value, smallest = problem.robot.velocity_scale, problem.robot.velocity_scale * ratio
+        expected = f"a value ≥ {smallest:.3g} on this machine: {why}"
+    elif limit == "robot.acceleration_limit":
+        value = problem.robot.acceleration_limit or float(np.max(acceleration))
+        fastest = float(np.max(acceleration)) * ratio**2
+        expected = (
+            f"limits ≥ {ratio**2:.3g} × the present ones ({fastest:.3g} rad/s² on the fastest joint) "
+            f"on this machine: {why}"
+        )
+    else:
+        value = problem.robot.jerk_limit or float(np.max(jerk))
+        fastest = float(np.max(jerk)) * ratio**3
+        expected = (
+            f"limits ≥ {ratio**3:.3g} × the present ones ({fastest:.3g} rad/s³ on the fastest joint) "
+            f"on this machine: {why}"
+        )
+    raise ProblemError(file, limit, expected, value)
+
+
+def check_trajectory_samples(problem: Problem, joints: int, duration: float, dwell: float) -> None:
+    """Raise :class:`ProblemError` when a timed trajectory of ``duration`` s (``dwell`` s of them
+    dwells) has more samples than this machine can hold (:func:`trajectory_samples_budget`): the
+    check, on the trajectory itself, after its timing and before it is sampled, of what
+    :func:`check_trajectory_size` estimated. Names ``rate_hz`` when a lower rate would do, else
+    ``dwell_s`` or ``velocity_scale`` after the larger of the dwells and the motion."""
+    budget = trajectory_samples_budget(problem, joints)
+    rate = sample_rate(problem)
+    if budget is None or duration * rate <= budget:
+        return
+    file = str(problem.source) if problem.source else "<inline>"
+    traj = problem.trajectory
+    per_sample = SAMPLE_BYTES_PER_JOINT * joints
+    why = (
+        f"the timed trajectory lasts {duration:.4g} s ({duration - dwell:.4g} s moving): "
+        f"{duration * rate:.3g} samples at {rate:g} Hz need {duration * rate * per_sample / 1e9:.3g} GB, "
+        f"{budget * per_sample / 1e9:.3g} GB is free here"
+    )
+    if traj.rate_hz > 1000.0 and duration * 1000.0 <= budget:
+        expected = f"a value ≤ {budget / duration:.3g} Hz on this machine: {why}"
+        raise ProblemError(file, "trajectory.rate_hz", expected, traj.rate_hz)
+    if dwell >= duration - dwell:
+        raise ProblemError(file, "trajectory.dwell_s", f"a shorter dwell: {why}", traj.dwell_s)
+    raise ProblemError(
+        file,
+        "robot.velocity_scale",
+        f"a faster motion (a larger velocity_scale, acceleration_limit or jerk_limit): {why}",
+        problem.robot.velocity_scale,
     )
 
 
@@ -788,6 +1020,11 @@ def problem_from_dict(data: dict[str, Any], source: Path | None = None) -> Probl
     file = str(source) if source else "<inline>"
     problem = _build(Problem, data, "", file)
     problem = dataclasses.replace(problem, source=source)
+    robot = data.get("robot", {})
+    if problem.robot.urdf is not None and "name" not in robot:  # a user arm is named by its file
+        problem = dataclasses.replace(
+            problem, robot=dataclasses.replace(problem.robot, name=Path(problem.robot.urdf).stem)
+        )
     _check_consistency(problem, file)
     return problem
 
@@ -869,9 +1106,14 @@ def _check_range(x: float, meta: Any, where: str, file: str) -> None:
     lo, hi, lo_open = meta.get("lo"), meta.get("hi"), meta.get("lo_open", False)
     unit = f" {meta.get('unit')}" if meta.get("unit") else ""
     if lo is not None and (x < lo or (lo_open and x == lo)):
-        raise ProblemError(file, where, f"a value {'>' if lo_open else '≥'} {lo:g}{unit}", x)
+        raise ProblemError(file, where, f"a value {'>' if lo_open else '≥'} {_bound(lo)}{unit}", x)
     if hi is not None and x > hi:
-        raise ProblemError(file, where, f"a value ≤ {hi:g}{unit}", x)
+        raise ProblemError(file, where, f"a value ≤ {_bound(hi)}{unit}", x)
+
+
+def _bound(x: float) -> str:
+    """A declared bound as text: an integer in full (2147483647), a float as ``:g``."""
+    return str(x) if isinstance(x, int) else f"{x:g}"
 
 
 def _check_consistency(p: Problem, file: str) -> None:
@@ -988,6 +1230,22 @@ def _check_consistency(p: Problem, file: str) -> None:
         raise ProblemError(
             file, "world.light_radius_m", f"a light smaller than the light sphere (< {ls.radius_m:g} m)", p.world.light_radius_m
         )
+    offset = float(np.linalg.norm(p.world.light_offset_m))
+    if offset >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "world.light_offset_m",
+            f"an offset shorter than the light sphere's radius ({offset:.3g} m ≥ {ls.radius_m:g} m puts "
+            "the real light anywhere, even behind the object)",
+            list(p.world.light_offset_m),
+        )
+    if p.world.noise_std > light.saturation:
+        raise ProblemError(
+            file,
+            "world.noise_std",
+            f"a noise σ ≤ light.saturation = {light.saturation:g} (more drowns every capture)",
+            p.world.noise_std,
+        )
 
 
 def _check_lightset(p: Problem, file: str) -> None:
@@ -1077,6 +1335,11 @@ def reference_markdown() -> str:
         "metres (`_m`), angles in degrees (`_deg`), paths relative to the problem file.",
         "The built-in problems are in `problems/`; `optlight problems` lists them.",
         "",
+        "`optlight check` (and every command, before its work) also checks what this machine can do: the",
+        "solve's memory (`camera.width` × `camera.height`) and the sampled trajectory's (its duration, from",
+        "`trajectory.dwell_s` and the robot's limits, × `trajectory.rate_hz`); a refusal names the key and",
+        "the largest (or smallest) value that fits here.",
+        "",
     ]
 
     def walk(cls: type, prefix: str) -> None:
@@ -1095,8 +1358,8 @@ def reference_markdown() -> str:
                 m = f.metadata
                 rng = ""
                 if m.get("lo") is not None or m.get("hi") is not None:
-                    lo = "" if m.get("lo") is None else f"{'>' if m.get('lo_open') else '≥'} {m['lo']:g}"
-                    hi = "" if m.get("hi") is None else f"≤ {m['hi']:g}"
+                    lo = "" if m.get("lo") is None else f"{'>' if m.get('lo_open') else '≥'} {_bound(m['lo'])}"
+                    hi = "" if m.get("hi") is None else f"≤ {_bound(m['hi'])}"
                     rng = ", ".join(x for x in (lo, hi) if x)
                 lines.append(
                     f"| `{f.name}` | {_describe(hints[f.name])} | {m.get('unit', '')} | {_default_text(f)} | {rng} | {m.get('doc', '')} |"

@@ -22,6 +22,17 @@ def usable_cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
+#: Most worker processes of a local cluster per usable core (``optlight batch`` and ``cell``): each
+#: worker is a single-threaded solver process, so more than a few per core only share the cores,
+#: multiply the memory and make the cluster slow to start.
+WORKERS_PER_CORE = 4
+
+
+def max_local_workers() -> int:
+    """The most worker processes a local cluster may start here: :data:`WORKERS_PER_CORE` per usable core."""
+    return WORKERS_PER_CORE * usable_cores()
+
+
 def thread_count() -> int:
     """Threads to split work over: ``OMP_NUM_THREADS`` when it is a positive integer, else
     :func:`usable_cores`."""

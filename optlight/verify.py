@@ -1,4 +1,4 @@
-"""Independent verification of a timed plan before anything is exported (DESIGN §6).
+"""Independent verification of a timed plan before anything is exported (docs/design.md §6).
 
 The checks use only the trajectory's own samples and the caller's forward kinematics, never the
 planner's or TOPPRA's internal data. The trajectory is resampled at ``rate_hz`` (≥ 1 kHz) plus every
@@ -8,7 +8,7 @@ dwell/motion boundary (and just before each), every capture time, and then:
 - ``velocity``: |q̇_j| ≤ v_max,j (1 + limit_rel);
 - ``acceleration``: |q̈_j| ≤ a_max,j (1 + limit_rel);
 - at every sample of every dwell (capture time included), with (a, R) = light_pose(q):
-  ``h``: |h| = |Rᵀ(O − a) − [0, 0, b]| ≤ h_m (on the sphere and aimed at O, DESIGN §3);
+  ``h``: |h| = |Rᵀ(O − a) − [0, 0, b]| ≤ h_m (on the sphere and aimed at O, docs/design.md §3);
   ``aim``: angle between the light axis R e_z and O − a ≤ aim_rad;
   ``landmark``: |a − p_i| ≤ landmark_m for the dwell's landmark p_i;
 - ``path`` (when a planned path is given): distance from every sampled light position to the
@@ -20,6 +20,15 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``acceleration_continuity``: on the controller's grid t_k = k / rate_hz, the largest jump
   |q̈_j(t_{k+1}) − q̈_j(t_k)| relative to what the jerk limit allows in one step, j_max,j / rate_hz
   (a step of q̈, as TOPPRA's parametrization has, shows as a ratio far above 1);
+- with controller waypoints (the points of joint_trajectory.yaml): ``interpolation``: at every sample,
+  |q̂_j(t) − q_j(t)| ≤ interpolation_rad, q̂ the quintic Hermite interpolation of the waypoints
+  (the polynomial of degree 5 per interval with the waypoints' q, q̇, q̈ at both ends, as ROS 2's
+  joint_trajectory_controller interpolates them), evaluated here by its own basis functions
+  (:func:`quintic_hermite`);
+- with a dynamics model (:class:`optlight.robot.Dynamics`: the URDF's inertias and the lamp):
+  ``torque``: |τ_j| ≤ τ_max,j at every sample, τ = M(q) q̈ + C(q, q̇) q̇ + g(q) by inverse dynamics
+  (pinocchio's RNEA), τ_max the robot's published torque limits; a robot without them has its peak
+  torques reported (:attr:`VerificationReport.torques`) and the check skipped;
 - with a view check (:class:`optlight.environment.view.ViewCheck`, exact ray casting at the captures):
   ``view`` (camera rays to the object blocked by a robot link or the light housing) and ``beam``
   (light rays to the object blocked by a robot link), each the largest blocked fraction of a
@@ -52,7 +61,7 @@ from scipy.spatial import cKDTree
 from optlight.errors import VerificationError
 from optlight.geometry import LightSphere, h_residual
 from optlight.jsondata import json_safe
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 
 Array = NDArray[np.float64]
 LightPose = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
@@ -62,6 +71,14 @@ EnvironmentCheck = Callable[[np.ndarray, np.ndarray, np.ndarray], Any]
 #: (joint angles at the captures (M, n), capture times (M,)) -> a ViewReport (duck-typed: ``captures``
 #: with ``view_blocked``, ``view_body``, ``view_bodies``, ``beam_*``, ``capture``, ``time_s``).
 ViewCheck = Callable[[np.ndarray, np.ndarray], Any]
+
+#: Points a controller interpolates quintically (duck-typed, as
+#: :class:`optlight.planning.waypoints.Waypoints`): ``t`` (K,) s, ``q``, ``qd``, ``qdd`` (K, n).
+ControllerPoints = Any
+
+#: Joint torques of a motion (duck-typed, as :class:`optlight.robot.Dynamics`): ``torques(q, q̇, q̈)``
+#: (T, n) N·m, ``torque_limit`` (n,) N·m or None, ``torque_limit_source`` (str).
+TorqueModel = Any
 
 #: Check names of the environment pair kinds.
 ENVIRONMENT_CHECKS = {"obstacle": "clearance", "self": "self_collision", "view": "view_cone"}
@@ -82,6 +99,7 @@ class Tolerances:
     aim_rad: float = 1e-4
     landmark_m: float = 1e-6
     path_m: float = 5e-3
+    interpolation_rad: float = 1e-4
 
 
 @dataclass(frozen=True)
@@ -122,6 +140,33 @@ class CheckResult:
 
 
 @dataclass(frozen=True)
+class TorqueSummary:
+    """The joint torques along the plan: per joint (``joints``) the peak |τ_j| (``peak_nm``, N·m) and
+    when (``time_s``), the limit (``limit_nm``) and the peak's fraction of it (``fraction``), None
+    for a robot without published limits; ``source`` where the limits come from."""
+
+    joints: tuple[str, ...]
+    peak_nm: tuple[float, ...]
+    time_s: tuple[float, ...]
+    limit_nm: tuple[float, ...] | None
+    fraction: tuple[float, ...] | None
+    source: str
+
+    def lines(self) -> list[str]:
+        """One line per joint: peak, limit and fraction (or that no limit is published)."""
+        if self.limit_nm is None or self.fraction is None:
+            head = [f"Joint torques (not checked: {self.source}):"]
+            return head + [
+                f"  {j}: peak |τ| = {p:.3g} N·m at t = {t:.4f} s"
+                for j, p, t in zip(self.joints, self.peak_nm, self.time_s, strict=True)
+            ]
+        rows = zip(self.joints, self.peak_nm, self.time_s, self.limit_nm, self.fraction, strict=True)
+        return [f"Joint torques (limits: {self.source}):"] + [
+            f"  {j}: peak |τ| = {p:.3g} N·m at t = {t:.4f} s, {f:.1%} of {lim:.4g} N·m" for j, p, t, lim, f in rows
+        ]
+
+
+@dataclass(frozen=True)
 class VerificationReport:
     """Outcome of :func:`verify_trajectory`."""
 
@@ -134,6 +179,7 @@ class VerificationReport:
     skipped: tuple[str, ...] = ()
     elapsed_s: float = 0.0
     advisory: tuple[str, ...] = ()
+    torques: TorqueSummary | None = None
 
     @property
     def passed(self) -> bool:
@@ -164,6 +210,7 @@ class VerificationReport:
             "counts": self.counts,
             "checks": {k: {**json_safe(c), "passed": c.passed} for k, c in self.checks.items()},
             "violations": json_safe(self.violations),
+            "torques": json_safe(self.torques) if self.torques is not None else None,
         }
 
     def summary(self) -> str:
@@ -189,6 +236,8 @@ class VerificationReport:
         for name in self.advisory:
             if name in self.checks:
                 lines.append(f"  note {name:<{width}}  reported only: it does not decide the verdict")
+        if self.torques is not None:
+            lines.extend(self.torques.lines())
         if self.violations:
             lines.append(f"Violations (first {MAX_EPISODES} episodes per check):")
             lines.extend(f"  {v.check}: {v.message}" for v in self.violations)
@@ -216,6 +265,8 @@ def verify_trajectory(
     environment: EnvironmentCheck | None = None,
     jerk_limit: ArrayLike | None = None,
     view: ViewCheck | None = None,
+    waypoints: ControllerPoints | None = None,
+    dynamics: TorqueModel | None = None,
     advisory: tuple[str, ...] = (),
     rate_hz: float = 1000.0,
     tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
@@ -238,6 +289,10 @@ def verify_trajectory(
         jerk_limit: (n,) positive jerk limits (rad/s³), or None to skip the jerk and acceleration
             continuity checks (a TOPPRA-timed trajectory has no bounded jerk).
         view: exact view and beam check at the captures, or None to skip it.
+        waypoints: the points a controller interpolates quintically (``t``, ``q``, ``qd``, ``qdd``),
+            or None to skip the ``interpolation`` check.
+        dynamics: the joint torques of the motion and their limits, or None to skip the ``torque``
+            check.
         advisory: names of checks reported without deciding the verdict.
         rate_hz: resampling rate, at least 1000 Hz; also the controller grid of the continuity check.
         tol: the tolerances.
@@ -382,6 +437,25 @@ def verify_trajectory(
             in_transfer,
             lambda k, v: f"light {v * 1e3:.3g} mm inside the sphere at t = {t[k]:.4f} s (> {tol.path_m * 1e3:.3g} mm)",
         )
+    if waypoints is not None:
+        interpolated = quintic_hermite(waypoints.t, waypoints.q, waypoints.qd, waypoints.qdd, t)
+        gap = np.abs(interpolated - q)
+        collector.joint_check(
+            "interpolation",
+            "largest |q̂_j − q_j|, q̂ the quintic interpolation of the controller waypoints",
+            "rad",
+            gap,
+            np.full(n, tol.interpolation_rad),
+            lambda j, k: (
+                f"joint {names[j]}: the waypoints' quintic interpolation is {gap[k, j]:.3g} rad from the plan "
+                f"at t = {t[k]:.4f} s (> {tol.interpolation_rad:.3g} rad)"
+            ),
+        )
+    else:
+        skipped += ("interpolation",)
+    torques = _torque_check(collector, dynamics, q, qd, qdd, names) if dynamics is not None else None
+    if torques is None or torques.limit_nm is None:
+        skipped += ("torque",)
     if environment is not None:
         _environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
     if view is not None:
@@ -400,7 +474,43 @@ def verify_trajectory(
         skipped=skipped,
         elapsed_s=time.perf_counter() - start,
         advisory=tuple(a for a in advisory if a in collector.checks),
+        torques=torques,
     )
+
+
+def _torque_check(
+    collector: _Collector, dynamics: TorqueModel, q: Array, qd: Array, qdd: Array, names: list[str]
+) -> TorqueSummary:
+    """``torque``: |τ_j| / τ_max,j ≤ 1 at every sample, τ = ``dynamics.torques(q, q̇, q̈)`` (N·m);
+    recorded only when the robot has limits. Returns the peaks per joint either way."""
+    tau = np.abs(dynamics.torques(q, qd, qdd))
+    peak = _worst_per_joint(tau)
+    peaks = tuple(float(tau[k, j]) for j, k in enumerate(peak))
+    times = tuple(float(collector.t[k]) for k in peak)
+    limit = dynamics.torque_limit
+    if limit is None:
+        return TorqueSummary(tuple(names), peaks, times, None, None, dynamics.torque_limit_source)
+    tau_max = np.asarray(limit, float)
+    ratio = tau / tau_max
+    collector.joint_check(
+        "torque",
+        "largest |τ_j| / torque_limit_j (inverse dynamics, the lamp included)",
+        "",
+        ratio,
+        np.ones(tau_max.size),
+        lambda j, k: (
+            f"joint {names[j]}: |τ| = {tau[k, j]:.4g} N·m > its limit {tau_max[j]:.4g} N·m at t = {collector.t[k]:.4f} s"
+        ),
+        value=lambda j, k: tau[k, j],
+        limit=lambda j, k: tau_max[j],
+    )
+    fraction = tuple(p / float(m) for p, m in zip(peaks, tau_max, strict=True))
+    return TorqueSummary(tuple(names), peaks, times, tuple(tau_max.tolist()), fraction, dynamics.torque_limit_source)
+
+
+def _worst_per_joint(x: Array) -> list[int]:
+    """Per column of x (T, n), the sample of its first NaN, else of its maximum."""
+    return [_worst(x[:, j]) for j in range(x.shape[1])]
 
 
 def _continuity_check(
@@ -495,6 +605,38 @@ def _environment_checks(collector: _Collector, report: Any, samples: int) -> Non
             for v in report.violations
             if v.kind == kind
         )
+
+
+def quintic_hermite(t_points: ArrayLike, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, t: ArrayLike) -> Array:
+    """Positions (T, n) at times t (T,) of the quintic Hermite interpolation of points
+    (t_k, q_k, q̇_k, q̈_k) (K,) and (K, n) each: on [t_k, t_{k+1}], h = t_{k+1} − t_k, x = (t − t_k)/h,
+
+        q̂ = H₀ q_k + H₁ h q̇_k + H₂ h² q̈_k + H₃ q_{k+1} + H₄ h q̇_{k+1} + H₅ h² q̈_{k+1},
+        H₀ = 1 − 10x³ + 15x⁴ − 6x⁵,  H₁ = x − 6x³ + 8x⁴ − 3x⁵,  H₂ = (x² − 3x³ + 3x⁴ − x⁵)/2,
+        H₃ = 10x³ − 15x⁴ + 6x⁵,      H₄ = −4x³ + 7x⁴ − 3x⁵,     H₅ = (x³ − 2x⁴ + x⁵)/2,
+
+    the basis whose values and first two derivatives at x = 0 and 1 pick out one of the six end
+    values each. NaN outside [t_0, t_K] (a time the points do not cover)."""
+    tp = np.asarray(t_points, float)
+    q, qd, qdd = (np.asarray(a, float) for a in (q, qd, qdd))
+    times = np.asarray(t, float)
+    k = np.clip(np.searchsorted(tp, times, side="right") - 1, 0, tp.size - 2)
+    h = (tp[k + 1] - tp[k])[:, None]
+    x = (times - tp[k])[:, None] / h
+    x2, x3 = x * x, x * x * x
+    x4, x5 = x3 * x, x3 * x2
+    basis = (
+        1 - 10 * x3 + 15 * x4 - 6 * x5,
+        x - 6 * x3 + 8 * x4 - 3 * x5,
+        0.5 * (x2 - 3 * x3 + 3 * x4 - x5),
+        10 * x3 - 15 * x4 + 6 * x5,
+        -4 * x3 + 7 * x4 - 3 * x5,
+        0.5 * (x3 - 2 * x4 + x5),
+    )
+    ends = (q[k], h * qd[k], h**2 * qdd[k], q[k + 1], h * qd[k + 1], h**2 * qdd[k + 1])
+    out = sum(b * e for b, e in zip(basis, ends, strict=True))
+    outside = (times < tp[0] - 1e-9) | (times > tp[-1] + 1e-9)
+    return np.where(outside[:, None], np.nan, out)
 
 
 def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:

@@ -199,7 +199,9 @@ def test_the_cluster_run_finishes_every_row_and_records_the_failure(cluster_run:
             assert (cluster_run["out"] / record["folder"] / "plan.json").is_file()
             assert record["metrics"]["verified"] is True
     assert any("moved from zenith" in w for w in records[spec.rows[WARNS].id]["warnings"])
-    assert not records[spec.rows[0].id]["warnings"]
+    # an ordinary row places every landmark where it was found (its arm, kept out of the light's beam,
+    # may leave the sphere between two captures: a warning of the path, not of the landmarks)
+    assert not [w for w in records[spec.rows[0].id]["warnings"] if "moved" in w or "dropped" in w]
     table = (cluster_run["out"] / "results.csv").read_text().splitlines()
     assert len(table) == 1 + len(spec.rows) and table[0].startswith("row,robot.base_position_m,status")
     assert "no landmark is reachable" in (cluster_run["out"] / "results.md").read_text()

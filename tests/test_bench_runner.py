@@ -220,3 +220,33 @@ def test_every_real_benchmark_imports_and_has_a_run(runner: ModuleType) -> None:
     modules["solve"] = runner.load_module(runner.BENCH_DIR / f"{runner.PIPELINE_MODULE}.py")
     assert {"scene", "landmarks", "environment", "scaling", "command"} <= set(modules)
     assert all(callable(getattr(m, "run", None)) for m in modules.values())
+
+
+def test_readme_is_rendered_from_the_committed_results(runner: ModuleType) -> None:
+    """benchmarks/README.md is what the renderer makes of the latest results in the repository, so
+    its tables cannot drift from them (``python benchmarks/run.py --readme-only`` renders it)."""
+    assert runner.README.read_text() == runner.readme()
+
+
+def test_readme_shows_every_results_folder_with_its_date_and_machine(
+    runner: ModuleType, bench_dir: Path, tmp_path: Path
+) -> None:
+    results = tmp_path / "results"
+    readme_before = runner.README.read_bytes()
+    assert runner.bench(["fake"], quick=True, out=results, bench_dir=bench_dir) == 0
+    assert runner.bench(["fake"], quick=True, out=results / "fake_alone", bench_dir=bench_dir) == 0
+    assert runner.README.read_bytes() == readme_before  # results outside benchmarks/results: untouched
+    full = json.loads((results / "latest.json").read_text())
+    alone = json.loads((results / "fake_alone" / "latest.json").read_text())
+
+    text = runner.readme(results, bench_dir)
+    assert text.startswith(runner.README_INTRO)
+    assert text.index("## Full run") < text.index("## `fake_alone`")
+    for data in (full, alone):
+        assert data["timestamp"] in text
+    machine = runner.machine_line(full["machine"], commit=False)
+    assert text.count(f"Machine: {machine}") == 2 and "; git " not in text
+    assert text.count("| fake | solve [ms] | 1.5 | 2.25 | 97.5 | – | – |") == 2
+    assert "- `fake`:" not in text  # the fake module has no docstring to describe it
+    (bench_dir / "bench_fake.py").write_text('"""A fake: ``run`` returns fixed numbers.\n\nMore."""\n' + FAKE)
+    assert "- `fake`: A fake: `run` returns fixed numbers." in runner.readme(results, bench_dir)

@@ -1,7 +1,7 @@
 """The offline preview in a real browser: headless Chromium (Debian's, through playwright) renders
 the saved HTML with WebGL on SwiftShader; the robot must be visible where its joints project.
 
-Skipped only when /usr/bin/chromium is missing (``.ci/run`` installs it). Flags as DESIGN §7
+Skipped only when /usr/bin/chromium is missing (``.ci/run`` installs it). Flags as docs/design.md §7
 says; playwright's own browsers are never downloaded.
 """
 

@@ -16,13 +16,14 @@ import pytest
 from PIL import Image
 from scipy.ndimage import binary_erosion
 
-from optlight.capture import ModelCamera, calibration, linearise, respond, write_capture_png
+from optlight.capture import ModelCamera, calibration, write_capture_png
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import FolderCamera, MissingCaptureError
 from optlight.capture.mitsuba import MitsubaCamera
 from optlight.errors import ProblemError
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff, lambertian
+from optlight.scene.response import linearise, respond
 from optlight.setup import Setup
 from optlight.spec import LightSpec, LoopSpec, WorldSpec, problem_from_dict
 
@@ -237,15 +238,15 @@ def write_csv(folder: Path, rows) -> None:
 
 def test_folder_camera_refuses_a_missing_or_wrong_sized_image(tmp_path: Path, small_setup: Setup) -> None:
     scene = small_setup.scene
-    a = scene.sphere.position(0.3, 1.0)
+    a, b = scene.sphere.position(0.3, 1.0), scene.sphere.position(0.5, 3.0)
     write_capture_png(tmp_path / "ok.png", np.zeros((scene.camera.height, scene.camera.width)), 1.0)
     write_capture_png(tmp_path / "small.png", np.zeros((10, 12)), 1.0)
-    write_csv(tmp_path, [("ok.png", a), ("gone.png", a)])
+    write_csv(tmp_path, [("ok.png", a), ("gone.png", b)])
     with pytest.raises(ProblemError) as missing:
         FolderCamera(tmp_path, scene.camera)
     message = str(missing.value)
     assert "gone.png" in message and "\n" not in message
-    write_csv(tmp_path, [("ok.png", a), ("small.png", a)])
+    write_csv(tmp_path, [("ok.png", a), ("small.png", b)])
     with pytest.raises(ProblemError) as wrong:
         FolderCamera(tmp_path, scene.camera)
     message = str(wrong.value)
@@ -253,6 +254,37 @@ def test_folder_camera_refuses_a_missing_or_wrong_sized_image(tmp_path: Path, sm
     (tmp_path / "captures.csv").unlink()
     with pytest.raises(ProblemError, match="captures.csv"):
         FolderCamera(tmp_path, scene.camera)
+
+
+def test_folder_camera_refuses_rows_a_capture_cannot_be_matched_to(tmp_path: Path, small_setup: Setup) -> None:
+    """Two rows naming one image (they wrecked a calibration when accepted), two rows with the light
+    at one place (a capture there would match either): one line naming captures.csv and the rows."""
+    scene = small_setup.scene
+    a, b = scene.sphere.position(0.3, 1.0), scene.sphere.position(0.5, 3.0)
+    for name in ("x.png", "y.png"):
+        write_capture_png(tmp_path / name, np.zeros((scene.camera.height, scene.camera.width)), 1.0)
+    write_csv(tmp_path, [("x.png", a), ("y.png", b)])
+    FolderCamera(tmp_path, scene.camera)  # distinct names and lights: accepted
+    write_csv(tmp_path, [("x.png", a), ("y.png", b), ("x.png", scene.sphere.position(0.6, 2.0))])
+    with pytest.raises(ProblemError) as duplicate:
+        FolderCamera(tmp_path, scene.camera)
+    message = str(duplicate.value)
+    assert "captures.csv" in message and "x.png on rows 0 and 2" in message and "\n" not in message
+    write_csv(tmp_path, [("x.png", a), ("y.png", a + [1.5e-3, 0.0, 0.0])])  # a light 0.75 mm from both
+    with pytest.raises(ProblemError) as ambiguous:
+        FolderCamera(tmp_path, scene.camera)
+    message = str(ambiguous.value)
+    assert "captures.csv" in message and "rows 0 and 1 1.5 mm apart" in message and "\n" not in message
+    write_csv(tmp_path, [("x.png", a), ("", b)])
+    with pytest.raises(ProblemError, match="an image file name on row 1"):
+        FolderCamera(tmp_path, scene.camera)
+    inner = tmp_path / "inner"  # a row naming a file outside the images' folder, which exists there
+    inner.mkdir()
+    write_capture_png(inner / "x.png", np.zeros((scene.camera.height, scene.camera.width)), 1.0)
+    write_csv(inner, [("x.png", a), ("../y.png", b)])
+    outside = r"captures\.csv: image: expected a file name in the images' folder on row 1"
+    with pytest.raises(ProblemError, match=outside):
+        FolderCamera(inner, scene.camera)
 
 
 def test_mitsuba_specular_highlights_are_left_out_of_the_fit() -> None:

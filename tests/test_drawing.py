@@ -14,6 +14,7 @@ from conftest import reduced_problem
 
 import optlight
 from optlight.planning.timing import time_parameterize
+from optlight.report import FigureDrafts
 from optlight.viz.drawing import FigureJob, FigureWorker
 from optlight.viz.trajectory_figures import trajectory_figure
 
@@ -44,18 +45,20 @@ def test_a_worker_draws_what_this_process_draws_then_stops() -> None:
 
 def test_a_results_folder_is_the_same_with_a_worker(tmp_path: Path) -> None:
     """Drawn here, or by a worker: the landmark figures while the motion is planned, the motion's
-    while it is verified (both in solve), and written by save. The same bytes either way, with a
-    capture the placement moved (drawn where it is captured: solve and save give the figures the
-    same captures)."""
+    while it is verified (both as the solve's stages finish: FigureDrafts), and written by save. The
+    same bytes either way, with a capture the placement moved (drawn where it is captured: solve and
+    save give the figures the same captures)."""
     problem = reduced_problem(camera_px=64, landmarks={"count": 18})
     here, there = tmp_path / "here", tmp_path / "there"
     optlight.solve(problem).save(here, preview=False)
     with FigureWorker() as worker:
-        plan = optlight.solve(problem, worker=worker)
+        drafts = FigureDrafts(worker)
+        plan = optlight.solve(problem, on_stage=drafts)
         assert [c.index for c in plan.visited if c.status == "placed"] == [7]
         landmark_stems = ["landmarks_cost", "landmarks_histograms", "landmarks_images", "landmarks_polar"]
-        assert sorted(plan.figures) == sorted([*landmark_stems, "path", "trajectory"])  # all drawn in the solve
-        plan.save(there, preview=False, worker=worker)
+        # all drawn as the solve's stages finished
+        assert sorted(drafts.figures) == sorted([*landmark_stems, "path", "trajectory"])
+        plan.save(there, preview=False, worker=worker, drawn=drafts.figures)
     files = sorted(p.name for p in here.iterdir())
     assert files == sorted(p.name for p in there.iterdir())
     pngs = [name for name in files if name.endswith(".png")]

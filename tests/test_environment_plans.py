@@ -1,4 +1,4 @@
-"""Plans in an environment (issue 7), end to end on the obstacle problems at reduced sizes: the
+"""Plans in an environment, end to end on the obstacle problems at reduced sizes: the
 constrained plan clears every margin by the exact (coal) checks of the verification; the
 unconstrained plan of the same problem, checked afterwards, is caught and cannot be saved; a
 trajectory through the table and a light in the camera's view cone are caught by the verification."""
@@ -17,11 +17,12 @@ from conftest import reduced_problem
 import optlight
 from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
 from optlight.errors import UnreachableError, VerificationError
+from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark
 from optlight.planning.nlp import knot_bounds, run, tangent_basis
 from optlight.planning.placement import CLEARANCE_TOL, NEAR_STEP, POSE_TOL, ClearPosture, LightPlacement
 from optlight.planning.policy import Reacher, place_landmarks
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -287,7 +288,7 @@ def test_a_light_in_the_view_cone_is_caught() -> None:
 
 
 def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
-    """The issue's problem: table, camera stand, wall and the view cone at the captures (the
+    """table_wall: table, camera stand, wall and the view cone at the captures (the
     placement NLP gives the landmarks whose IK solution breaks a row clear joint angles)."""
     problem = reduced("table_wall")
     plan = solve_quietly(problem)
@@ -476,7 +477,7 @@ def test_a_placement_from_the_near_rows_is_the_one_from_every_row() -> None:
     assert row_sets and all(len(key) < rows / 2 for key in row_sets)
 
     nlp, n_env = placement._solver(None)
-    assert n_env == rows + len(env.view_labels(robot))
+    assert n_env == rows + len(env.view_labels(robot, beam=False))  # the beam: checked on the result
     full_lbg, full_ubg = np.r_[lbg, np.full(n_env, CAPTURE_SLACK)], np.r_[ubg, np.full(n_env, np.inf)]
     every = placement._margined(nlp, ik.theta, p, full_lbg, full_ubg, relax=True)
     assert every.success

@@ -10,20 +10,24 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from optlight.errors import UsageError, VerificationError
+from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.export import (
     MANIFEST,
     _yaml_float,
     _yaml_rows,
+    check_output_folder,
     joint_trajectory_text,
     json_safe,
     lp_direction,
     lp_text,
     write_file,
+    write_folder,
     write_results,
 )
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.motion import Trajectory
+from optlight.planning.timing import time_parameterize
+from optlight.planning.waypoints import controller_waypoints
 from optlight.scene.camera import Camera
 from optlight.spec import image_names
 from optlight.verify import VerificationReport, verify_trajectory
@@ -166,7 +170,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path) -> None:
     def broken() -> bytes:
         raise OSError("disk full")
 
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match=r"cannot write .*run: disk full; nothing was written"):
         write_results(
             tmp_path / "run",
             trajectory=traj,
@@ -243,6 +247,36 @@ def test_an_earlier_output_is_replaced_only_with_overwrite_and_user_files_stay(t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # no staging left
 
 
+def test_an_output_in_rounds_is_continued_by_its_kind_only_and_user_files_stay(tmp_path) -> None:
+    """An output written with ``resumable`` (the folder camera's rounds) is updated without
+    ``overwrite`` by a writer continuing that kind, which replaces only the files the manifest lists;
+    another kind, a plain writer and a finished output are refused as any earlier output."""
+    out = tmp_path / "run"
+
+    def writer(names: list[str]):
+        def write(staging: Path) -> list[Path]:
+            for name in names:
+                (staging / name).parent.mkdir(parents=True, exist_ok=True)
+                (staging / name).write_text("optlight")
+            return [staging / name for name in names]
+
+        return write
+
+    write_folder(out, writer(["state.json", "round_00/plan.json"]), resumable="rounds")
+    assert json.loads((out / MANIFEST).read_text())["resume"] == "rounds"
+    (out / "round_00" / "r00_000.png").write_text("the user's image")
+    before = tree(out)
+    for kwargs in ({}, {"resume": "other"}):
+        with pytest.raises(UsageError, match="earlier optlight run"):
+            write_folder(out, writer(["state.json"]), **kwargs)
+        assert tree(out) == before
+    write_folder(out, writer(["state.json", "round_00/plan.json", "round_01/plan.json"]), resume="rounds")
+    assert (out / "round_00" / "r00_000.png").read_text() == "the user's image"
+    assert "resume" not in json.loads((out / MANIFEST).read_text())  # finished
+    with pytest.raises(UsageError, match="earlier optlight run"):
+        check_output_folder(out, resume="rounds")
+
+
 @pytest.mark.parametrize(
     "manifest",
     ['{"files": ["../outside.txt"]}', '{"files": ["/etc/passwd"]}', "not json", '{"files": "a"}', "[]"],
@@ -272,7 +306,7 @@ def test_write_file_replaces_only_with_overwrite_and_never_a_folder(tmp_path) ->
         tmp.write_bytes(b"half")
         raise OSError("disk full")
 
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match=r"cannot write .*b.png: disk full; nothing was written"):
         write_file(path, broken, overwrite=True)
     assert path.read_bytes() == b"two" and sorted(p.name for p in path.parent.iterdir()) == ["b.png"]
 
@@ -322,13 +356,37 @@ def jerk_plan() -> Trajectory:
     return jerk_limited_timing(segments, VMAX, AMAX, JMAX, 0.3, joint_names=NAMES)
 
 
-def test_joint_trajectory_yaml_is_a_plain_ros_message_and_reads_back_to_1e_9(tmp_path) -> None:
+def hermite_solve(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """q at ``times`` of the quintic through points (t, q, q̇, q̈), each interval's six coefficients
+    solved from the 6×6 system of its end values (numpy.linalg.solve), in absolute time: an
+    implementation of its own, not optlight's closed forms."""
+    out = np.full((times.size, q.shape[1]), np.nan)
+    for k in range(t.size - 1):
+        inside = (times >= t[k]) & (times <= t[k + 1])
+        if not inside.any():
+            continue
+        rows = []
+        for tau in (t[k], t[k + 1]):
+            rows += [[tau**i for i in range(6)], [i * tau ** (i - 1) if i else 0.0 for i in range(6)]]
+            rows += [[i * (i - 1) * tau ** (i - 2) if i > 1 else 0.0 for i in range(6)]]
+        rhs = np.array([q[k], qd[k], qdd[k], q[k + 1], qd[k + 1], qdd[k + 1]])
+        coefficients = np.linalg.solve(np.array(rows), rhs)  # (6, n)
+        out[inside] = np.vander(times[inside], 6, increasing=True) @ coefficients
+    return out
+
+
+def test_joint_trajectory_yaml_holds_few_waypoints_the_quintic_follows_within_1e_4(tmp_path) -> None:
+    """joint_trajectory.yaml is a plain ROS message of waypoints, not samples: every dwell and motion
+    boundary, exact values of the plan at the times written, far fewer points than the controller
+    rate would give, and their quintic interpolation (solved here independently) stays within 1e-4
+    rad of the plan on a dense grid. The goal file holds the same trajectory."""
     import yaml
 
     from optlight.export import read_joint_trajectory, write_joint_trajectory
-
     traj = jerk_plan()
-    path = write_joint_trajectory(tmp_path / "joint_trajectory.yaml", traj, NAMES, 250.0)
+    waypoints = controller_waypoints(traj, rate_hz=1000.0)
+    path, goal = write_joint_trajectory(tmp_path, waypoints, NAMES)
+    assert (path.name, goal.name) == ("joint_trajectory.yaml", "follow_joint_trajectory_goal.yaml")
     doc = yaml.safe_load(path.read_text())  # a plain YAML reader, no optlight involved
     assert doc["joint_names"] == NAMES and doc["header"]["stamp"] == {"sec": 0, "nanosec": 0}
     points = doc["points"]
@@ -337,16 +395,56 @@ def test_joint_trajectory_yaml_is_a_plain_ros_message_and_reads_back_to_1e_9(tmp
     t = np.array([p["time_from_start"]["sec"] * 10**9 + p["time_from_start"]["nanosec"] for p in points]) / 1e9
     assert t[0] == 0.0 and np.all(np.diff(t) > 0) and t[-1] == pytest.approx(traj.duration, abs=1e-9)
     assert np.all(np.isin(np.round(traj.boundaries, 9), np.round(t, 9)))  # every dwell start and end
-    for key, value in zip(("positions", "velocities", "accelerations"), traj.sample(t), strict=True):
-        np.testing.assert_array_equal(np.array([p[key] for p in points]), value)  # exact floats
+    assert len(points) < 0.1 * traj.sample_times(1000.0).size  # waypoints, not 1 kHz samples
+    q, qd, qdd = (np.array([p[key] for p in points]) for key in ("positions", "velocities", "accelerations"))
+    for value, original in zip((q, qd, qdd), traj.sample(t), strict=True):
+        np.testing.assert_array_equal(value, original)  # exact floats
 
+    dense = np.linspace(0.0, t[-1], 20_001)
+    gap = np.abs(hermite_solve(t, q, qd, qdd, dense) - traj.sample(dense)[0])
+    assert gap.max() <= 1e-4
+    assert gap.max() > 1e-7  # the points are few enough for the interpolation to differ from the plan
     back = read_joint_trajectory(path, landmark_intervals=traj.landmark_intervals)
-    assert back.joint_names == tuple(NAMES) and back.duration == pytest.approx(traj.duration, abs=1e-9)
-    for original, read in zip(traj.sample(t), back.sample(t), strict=True):
-        np.testing.assert_allclose(read, original, rtol=0, atol=1e-9)
-    # between the points the quintic stays close to the jerk-limited motion (4 ms apart here)
-    mid = 0.5 * (t[1:] + t[:-1])
-    np.testing.assert_allclose(back.sample(mid)[0], traj.sample(mid)[0], atol=1e-6)
+    np.testing.assert_allclose(back.sample(dense)[0], traj.sample(dense)[0], rtol=0, atol=1e-4)
+
+    document = yaml.safe_load(goal.read_text())
+    assert set(document) == {"trajectory", "goal_time_tolerance"}
+    assert document["trajectory"] == doc and document["goal_time_tolerance"] == {"sec": 0, "nanosec": 500_000_000}
+
+
+def test_interpolation_check_fails_waypoints_too_far_apart() -> None:
+    """The verification interpolates the waypoints on its own: the chosen ones pass; every other one
+    of them dropped (the boundaries kept) leaves the quintic too far from the plan, and the check
+    names a joint and a time."""
+    from dataclasses import replace
+
+    traj = jerk_plan()
+    args = dict(
+        light_pose=light_pose,
+        lower=LOWER,
+        upper=UPPER,
+        velocity_limit=VMAX,
+        acceleration_limit=AMAX,
+        sphere=SPHERE,
+        landmark_positions=SPHERE.position(LANDMARKS_Q[:, 0], LANDMARKS_Q[:, 1]),
+    )
+    waypoints = controller_waypoints(traj)
+    report = verify_trajectory(traj, waypoints=waypoints, **args)
+    assert report.passed and 0 < report.checks["interpolation"].max_value <= 1e-4
+    assert "interpolation" in verify_trajectory(traj, **args).skipped
+    keep = np.isin(np.round(waypoints.t, 9), np.round(traj.boundaries, 9))
+    keep[::2] = True
+    sparse = replace(
+        waypoints,
+        nanoseconds=waypoints.nanoseconds[keep],
+        q=waypoints.q[keep],
+        qd=waypoints.qd[keep],
+        qdd=waypoints.qdd[keep],
+    )
+    bad = verify_trajectory(traj, waypoints=sparse, **args)
+    assert not bad.passed and bad.checks["interpolation"].max_value > 1e-4
+    v = next(v for v in bad.violations if v.check == "interpolation")
+    assert v.joint in NAMES and "quintic interpolation" in v.message
 
 
 def test_quintic_points_reproduce_a_quintic_exactly() -> None:
@@ -391,6 +489,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
         image_pattern="cap_{index:02d}.png",
         light_directions_camera=directions(),
         light_positions=positions,
+        light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
         joint_names=NAMES,
     )
     with path.open() as f:
@@ -414,6 +513,7 @@ def test_every_trigger_lies_in_a_dwell_at_rest_and_names_match_lights_lp(tmp_pat
             image_pattern="x{index}",
             light_directions_camera=directions(),
             light_positions=positions,
+            light_angles_deg=np.rad2deg(LANDMARKS_Q[:, :2]),
             joint_names=NAMES,
         )
 
@@ -459,13 +559,13 @@ def test_trajectory_files_are_the_text_of_value_by_value_formatting(tmp_path) ->
     traj.to_csv(tmp_path / "trajectory.csv", NAMES, rate_hz=rate)
     assert (tmp_path / "trajectory.csv").read_bytes() == reference.getvalue().encode()
 
-    text = joint_trajectory_text(traj, NAMES, rate)
-    ns = np.unique(np.round(t * 1e9).astype(np.int64))
-    q, qd, qdd = traj.sample(ns / 1e9)
-    for k in (0, len(ns) // 2, len(ns) - 1):
+    waypoints = controller_waypoints(traj, rate_hz=rate)
+    text = joint_trajectory_text(waypoints, NAMES)
+    q, qd, qdd = waypoints.q, waypoints.qd, waypoints.qdd
+    for k in (0, len(waypoints) // 2, len(waypoints) - 1):
         for name, values in (("positions", q[k]), ("velocities", qd[k]), ("accelerations", qdd[k])):
             assert f"{name}: [" + ", ".join(_yaml_float(v) for v in values) + "]\n" in text
-    assert text.count("positions: [") == len(ns)
+    assert text.count("positions: [") == len(waypoints)
     # every form a float takes: exponent without a point (YAML would read '1e-05' as a string),
     # with one, negative zero, the largest and smallest magnitudes
     odd = np.array([[1e-05, 1.5e-07, -0.0, 0.1, 1e16, 123456789.123, 5e-324, -1.7976931348623157e308]])

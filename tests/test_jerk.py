@@ -10,13 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 
+from optlight.planning.chord import chord_path, spline_position_range
 from optlight.planning.jerk import (
     JerkLimitedMotion,
     derivative_maxima,
     jerk_limited_timing,
     rest_to_rest_duration,
 )
-from optlight.planning.timing import chord_path, spline_position_range, time_parameterize
+from optlight.planning.timing import time_parameterize
 
 VMAX = np.array([1.0, 1.5, 0.8])
 AMAX = np.array([3.0, 2.0, 4.0])
@@ -226,3 +227,19 @@ def test_the_timed_path_keeps_the_joint_limits_where_its_spline_bulged() -> None
         assert (q <= UPPER + 1e-9).all() and (q >= LOWER - 1e-9).all(), timed.__name__
         unbounded = timed([w], *limits, 0.1)
         assert unbounded.sample(np.linspace(0.0, unbounded.duration, 40001))[0][:, 2].max() > UPPER[2]
+
+
+def test_rest_to_rest_moves_are_the_slowest_joints_double_s_time() -> None:
+    """ruckig's time-optimal multi-joint moves from rest to rest take the slowest joint's double-S
+    time, which the closed form gives joint by joint; no jerk-limited timing of the same stops beats it."""
+    from optlight.planning.jerk import rest_to_rest_moves
+
+    rng = np.random.default_rng(4)
+    postures = rng.uniform(-1.0, 1.0, (6, 3))
+    v, a, j = np.array([1.0, 2.0, 3.0]), np.array([5.0, 6.0, 7.0]), np.array([50.0, 60.0, 70.0])
+    moves = rest_to_rest_moves(postures, v, a, j)
+    closed = rest_to_rest_duration(np.abs(np.diff(postures, axis=0)), v, a, j).max(axis=1)
+    np.testing.assert_allclose(moves, closed, rtol=1e-9)
+    segments = [np.linspace(p, q, 5) for p, q in zip(postures[:-1], postures[1:], strict=True)]
+    timed = jerk_limited_timing(segments, v, a, j, 0.0)
+    assert np.all(np.diff(timed.segment_times, axis=1)[:, 0] >= moves - 1e-9)

@@ -1,8 +1,9 @@
-"""Light sets through the whole job (issue 12): a set designed on the allowed cap is placed, planned,
+"""Light sets through the whole job: a set designed on the allowed cap is placed, planned,
 verified and exported in the DiLiGenT layout; a grid reports the lights it had to replace."""
 
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
@@ -67,6 +68,15 @@ def test_diligent_folder_reads_back_with_the_achieved_lights(ps_plan: Plan, ps_f
     expected = (camera * np.array([[1.0], [-1.0], [-1.0]])).T
     np.testing.assert_allclose(folder.directions, expected, atol=1e-6)
     assert folder.images.shape == (len(ps_plan.visited), 48, 48)
+    # one naming and one frame across the exports: filenames.txt and light_directions.txt are
+    # captures.csv's image column and light directions, and lights.lp's rows
+    with (ps_folder / "captures.csv").open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    lp = [line.split() for line in (ps_folder / "lights.lp").read_text().splitlines()[1:]]
+    assert list(folder.names) == [r["image"] for r in rows] == [line[0] for line in lp]
+    columns = ("light_dir_right", "light_dir_up", "light_dir_to_camera")
+    np.testing.assert_allclose([[float(r[c]) for c in columns] for r in rows], folder.directions, atol=1e-9)
+    np.testing.assert_allclose([[float(x) for x in line[1:]] for line in lp], folder.directions, atol=1e-9)
     np.testing.assert_array_equal(folder.mask, ps_plan.scene.gbuffer.mask)
     for name in ("normal_map.png", "normal_error.png", "lightset_reach.png", "plan.json", "report.md"):
         assert (ps_folder / name).is_file()
@@ -77,7 +87,7 @@ def test_diligent_folder_reads_back_with_the_achieved_lights(ps_plan: Plan, ps_f
 def test_recovered_normals_match_the_model(ps_plan: Plan, ps_folder: Path) -> None:
     """The model's images are Lambertian with the ambient subtracted and shadowed or saturated lights
     rejected per pixel, so where three or more lights remain the least-squares normal is exact up to
-    the renderer's float rounding; the bound (mean 0.1°, the issue's noiseless bound) leaves room for the few pixels at a shadow's
+    the renderer's float rounding; the bound (mean 0.1°, the noiseless bound) leaves room for the few pixels at a shadow's
     edge, where a light is half in (the G-buffer normal is the pixel centre's, the image the
     pixel's). The statistics in plan.json are those of normals.npy."""
     import json

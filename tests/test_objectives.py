@@ -291,7 +291,11 @@ def test_reference_image_of_another_size_and_mask(tmp_path: Path, face_scene: Sc
     mask = np.zeros((48, 48), np.uint8)
     mask[:, :24] = 255
     Image.fromarray(mask).save(tmp_path / "mask.png")
-    problem = face_problem(tmp_path, {"kind": "image", "image": "big.npy", "mask": "mask.png"})
+    refused = face_problem(tmp_path, {"kind": "image", "image": "big.npy", "mask": "mask.png"})
+    both_sizes = r"objective\.reference\.image: .* 48 × 48 px .*big\.npy of 96 × 96 px"
+    with pytest.raises(ProblemError, match=both_sizes):
+        Objective.from_problem(refused, face_scene)  # stretched only when the problem says so
+    problem = face_problem(tmp_path, {"kind": "image", "image": "big.npy", "mask": "mask.png", "resize": True})
     objective = Objective.from_problem(problem, face_scene)
     assert objective.selection is not None
     columns = face_scene.gbuffer.pixel_index[objective.selection] % 48

@@ -15,8 +15,12 @@ import optlight
 from optlight.errors import UnreachableError, VerificationError
 from optlight.export import MANIFEST
 from optlight.geometry import h_residual
+from optlight.motion import Trajectory
+from optlight.pipeline import STAGES
 from optlight.plan import joint_path_length
-from optlight.planning.timing import Trajectory
+from optlight.planning.jerk import rest_to_rest_duration
+from optlight.planning.policy import LandmarkPlacement
+from optlight.stages import OptimizedPath, Route
 from optlight.verify import verify_trajectory
 
 
@@ -27,8 +31,36 @@ def small_problem(**overrides: dict) -> optlight.Problem:
 
 
 @pytest.fixture(scope="module")
-def plan() -> optlight.Plan:
-    return optlight.solve(small_problem())
+def solved() -> tuple[optlight.Plan, list[tuple[str, object]]]:
+    """The small problem's plan, and what its stage listener heard: (stage, result) in order."""
+    heard: list[tuple[str, object]] = []
+    plan = optlight.solve(small_problem(), on_stage=lambda stage, result: heard.append((stage, result)))
+    return plan, heard
+
+
+@pytest.fixture(scope="module")
+def plan(solved: tuple[optlight.Plan, list[tuple[str, object]]]) -> optlight.Plan:
+    return solved[0]
+
+
+def test_the_listener_hears_every_stage_with_its_result(
+    solved: tuple[optlight.Plan, list[tuple[str, object]]],
+) -> None:
+    """Each stage, in order, once, with the typed result the plan is made of (optlight.stages)."""
+    plan, heard = solved
+    assert [stage for stage, _ in heard] == list(STAGES)
+    results = dict(heard)
+    assert results["scene"] is plan.setup and results["landmarks"] is plan.landmarks
+    placement = results["placement"]
+    route, optimized = results["path"], results["nlp"]
+    assert isinstance(placement, LandmarkPlacement) and isinstance(route, Route)
+    assert route.visited is plan.visited
+    assert all(placement.landmarks[i] is v for i, v in zip(route.order, plan.visited, strict=True))
+    np.testing.assert_array_equal(route.landmark_thetas, plan.landmark_thetas)
+    np.testing.assert_array_equal(placement.thetas[route.order], plan.landmark_thetas)
+    assert isinstance(optimized, OptimizedPath) and optimized.visited is plan.visited
+    assert optimized.nlp is plan.nlp and optimized.path is plan.path and optimized.knot_ik is plan.knot_ik
+    assert results["timing"] is plan.trajectory and results["verify"] is plan.verification
 
 
 def test_plan_meets_the_light_constraints_and_limits(plan: optlight.Plan) -> None:
@@ -95,6 +127,7 @@ def test_save_writes_the_results_folder(plan: optlight.Plan, tmp_path: Path) -> 
     np.testing.assert_allclose(back.sample(t)[0], plan.trajectory.sample(t)[0], atol=2e-3)
     report = (folder / "report.md").read_text()
     assert "verification | passed" in report and "![path](path.png)" in report
+    assert "## Files and frames" in report and "x to the right of the image, y towards its top" in report
 
 
 def test_a_compressed_trajectory_is_refused(plan: optlight.Plan, tmp_path: Path) -> None:
@@ -185,7 +218,7 @@ def test_the_view_check_runs_on_every_plan_and_a_blocked_capture_is_refused(
         view=view_check_for(robot, plan.scene, plan.problem.light).check,
     )
     blocked = [v for v in report.violations if v.check == "view"]
-    assert blocked, "the default layout blocks the view at some capture (issue 11)"
+    assert blocked, "the default layout blocks the view at some capture"
     first = blocked[0]
     assert first.joint in {g.name for g in robot.model.frames} | {"light housing"}
     capture = int(first.message.split()[1])
@@ -204,15 +237,44 @@ def test_jerk_limited_plan_exports_for_the_controller(plan: optlight.Plan, tmp_p
     assert checks["jerk"].passed and checks["acceleration_continuity"].passed
     folder = tmp_path / "out"
     plan.save(folder, preview=False)
-    assert {"joint_trajectory.yaml", "captures.csv"} <= {p.name for p in folder.iterdir()}
+    written = {p.name for p in folder.iterdir()}
+    assert {"joint_trajectory.yaml", "follow_joint_trajectory_goal.yaml", "captures.csv"} <= written
     t = np.loadtxt(folder / "trajectory.csv", delimiter=",", skiprows=1, usecols=0)
     assert np.median(np.diff(t)) == pytest.approx(1.0 / plan.problem.trajectory.rate_hz)
     back = read_joint_trajectory(folder / "joint_trajectory.yaml")
-    times = np.linspace(0.0, plan.trajectory.duration, 101)
-    np.testing.assert_allclose(back.sample(times)[0], plan.trajectory.sample(times)[0], atol=1e-6)
+    times = np.linspace(0.0, plan.trajectory.duration, 2001)
+    np.testing.assert_allclose(back.sample(times)[0], plan.trajectory.sample(times)[0], atol=1e-4)
+    points = (folder / "joint_trajectory.yaml").read_text().count("positions: [")
+    assert checks["interpolation"].passed and points == len(plan.waypoints) < 0.1 * t.size
     lp = (folder / "lights.lp").read_text().split("\n")[1:-1]
     captures = (folder / "captures.csv").read_text().splitlines()[1:]
     assert [line.split()[0] for line in lp] == [row.split(",")[4] for row in captures]
+
+
+def test_moving_time_is_reported_against_its_rest_to_rest_bound(plan: optlight.Plan, tmp_path: Path) -> None:
+    """The time-optimal stops at the same postures, under the same limits, bound the moving time from
+    below; plan.json and report.md give both, and the peak torques per joint against their limits."""
+    bound = plan.summary()["motion_bound"]
+    assert bound["motion_time_s"] == pytest.approx(plan.motion_time)
+    assert 1.0 <= bound["ratio"] == pytest.approx(plan.motion_time / bound["rest_to_rest_s"])
+    assert 0 < bound["between_captures_rest_to_rest_s"] <= bound["between_captures_s"]
+    assert bound["between_captures_rest_to_rest_s"] < bound["rest_to_rest_s"]  # the approach and return too
+    # every move of the plan takes at least the slowest joint's double-S time between the postures
+    # the trajectory holds at its ends (the closed form, not ruckig), and the bound sums those
+    limits, segments = plan.setup.limits, plan.trajectory.segment_times
+    start, end = (plan.trajectory.sample(segments[:, k])[0] for k in (0, 1))
+    shortest = rest_to_rest_duration(np.abs(end - start), limits.velocity, limits.acceleration, limits.jerk).max(axis=1)
+    assert np.all(segments[:, 1] - segments[:, 0] >= shortest - 1e-9)
+    assert bound["between_captures_rest_to_rest_s"] == pytest.approx(shortest.sum(), rel=1e-9)
+    folder = tmp_path / "out"
+    plan.save(folder, preview=False)
+    saved = json.loads((folder / "plan.json").read_text())
+    assert saved["summary"]["motion_bound"] == pytest.approx(bound)
+    torques = saved["verification"]["torques"]
+    assert torques["joints"] == plan.robot.joint_names and len(torques["fraction"]) == plan.robot.n
+    assert saved["summary"]["torque_peak_fraction"] == dict(zip(torques["joints"], torques["fraction"], strict=True))
+    report = (folder / "report.md").read_text()
+    assert f"{bound['ratio']:.2f}×" in report and "peak joint torque / limit" in report
 
 
 def test_toppra_timing_stays_available() -> None:

@@ -404,7 +404,7 @@ def test_captures_keep_the_margins_where_they_can_and_the_rows_where_they_cannot
 def test_a_landmark_out_of_reach_is_placed_from_a_clear_posture_found_along_its_azimuth() -> None:
     """The lights of a camera-loop re-plan (default layout, 96² camera): landmark 4 at zenith 60°,
     azimuth 180° is out of reach, and the placement NLP finds its azimuth infeasible from the IK's
-    unconverged angles and from the previous capture's (the code before this stop raised here).
+    unconverged angles and from the previous capture's (a placement without the scan raises here).
     Scanning the azimuth with the reacher gives it a clear start: the landmark is placed on its
     azimuth, its posture holding the light there (pinocchio) clear of every row."""
     from optlight.planning.landmarks import Landmark

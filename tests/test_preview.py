@@ -492,7 +492,7 @@ def test_at_best_landmark_holds_the_light_there() -> None:
 
 
 def test_default_sized_preview_stays_under_5_mb():
-    """The issue's budget for preview.html, on a preview the size of the default problem's: its
+    """The budget for preview.html (5 MB), on a preview the size of the default problem's: its
     scene (the 101,760-triangle face, kept whole), the Panda, 36 landmarks and a 36-landmark tour of
     about 28 s (dwells of 0.5 s). The robot's meshes, decimated, take under 1.2 MB of it."""
     problem = load_problem("default")

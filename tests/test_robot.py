@@ -271,7 +271,7 @@ def test_visual_meshes_unread_of_a_user_urdf(tmp_path: Path) -> None:
 
 
 def test_example_robot_data_urdf_as_a_user_urdf_resolves_four_folders_up() -> None:
-    """kinova's meshes are package://example-robot-data/…, four folders above its URDF (the issue's case)."""
+    """kinova's meshes are package://example-robot-data/…, four folders above its URDF."""
     urdf = example_robot_data_dir() / "example-robot-data/robots/kinova_description/robots/kinova.urdf"
     problem = problem_from_dict(
         {"robot": {"name": "my kinova", "urdf": str(urdf), "frame": "j2s6s200_end_effector"}}
@@ -392,7 +392,7 @@ def test_every_robot_name_the_problem_files_accept_loads() -> None:
 def test_published_limits_and_problem_overrides() -> None:
     from optlight.spec import load_problem, problem_from_dict
 
-    panda = robot("panda")  # Franka's published values (DESIGN §7)
+    panda = robot("panda")  # Franka's published values (docs/design.md §7)
     np.testing.assert_array_equal(panda.acceleration_limit, [15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0])
     np.testing.assert_array_equal(panda.jerk_limit, 7500.0)
     np.testing.assert_allclose(robot("ur10").velocity_limit[:2], np.deg2rad(120.0))  # below the URDF's

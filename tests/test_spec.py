@@ -303,3 +303,12 @@ def test_image_patterns_are_checked_with_the_problem(pattern: str, fragment: str
     with pytest.raises(ProblemError, match=re.escape(fragment)) as err:
         problem_from_dict(data)
     assert err.value.key == "trajectory.image_pattern"
+
+
+def test_a_user_urdf_is_named_by_its_file_unless_the_problem_names_it(tmp_path: Path) -> None:
+    """Reports and errors name a user's arm, not the default robot's name."""
+    urdf = tmp_path / "my_arm.urdf"
+    urdf.write_text("<robot name='x'/>")
+    unnamed = problem_from_dict({"robot": {"urdf": str(urdf), "frame": "tool0"}})
+    named = problem_from_dict({"robot": {"urdf": str(urdf), "frame": "tool0", "name": "cell 3"}})
+    assert (unnamed.robot.name, named.robot.name) == ("my_arm", "cell 3")

@@ -24,21 +24,23 @@ PACKAGE = ROOT / "optlight"
 #: trajectory NLP, timing) both live in planning, above the built setup and below verification.
 LAYERS: list[set[str]] = [
     {"errors", "jsondata", "interrupts", "cache", "threads"},
+    {"locks"},
     {"spec"},
-    {"geometry"},
+    {"geometry", "motion"},
     {"scene", "robot"},
     {"objectives", "environment", "photometric_stereo"},
     {"setup"},
     {"capture"},
     {"planning"},
     {"verify"},
+    {"stages"},
     {"export"},
     {"datasets"},
     {"viz"},
     {"report"},
     {"plan"},
     {"pipeline", "preflight"},
-    {"acquisition", "batch"},
+    {"acquisition", "batch", "simulation"},
     {"cell"},
     {"cli"},
 ]
@@ -129,6 +131,37 @@ def test_no_import_cycles() -> None:
     assert not cycles, cycles
 
 
+#: What presents a plan (the results folder's report and its figures): the solve produces the plan
+#: and hands each stage's result to its listener (optlight.stages); it draws and writes nothing.
+PRESENTATION = ("optlight.report", "optlight.viz")
+
+#: The planning modules that still take the whole Setup and read what they need through it (the
+#: robot, sphere, limits, environment, scenes, objectives, solver settings and spec sections): the
+#: landmark search and the light-set design (the search scene and objective, the spec sections),
+#: the placement and its policy (Reacher: IK, posture and placement NLPs on the setup's robot,
+#: sphere and environment), the reachability map (through Reacher) and the trajectory NLP (robot,
+#: limits, environment, solver settings). The other planning modules take what they use.
+PLANNING_TAKING_SETUP = {"landmarks", "placement", "policy", "reach", "set_landmarks", "trajectory"}
+
+
+def test_the_solve_imports_no_presentation_module() -> None:
+    """pipeline.py imports neither the report nor the figures (type-only imports included): the
+    command line subscribes the figure worker to the solve's stages."""
+    imported = [target for target, _ in _imports(PACKAGE / "pipeline.py")]
+    assert not [t for t in imported if t.startswith(PRESENTATION)], imported
+
+
+def test_planning_modules_take_what_they_use() -> None:
+    """No planning module imports the setup module (type-only imports included) but those of
+    :data:`PLANNING_TAKING_SETUP`, which still take the whole Setup."""
+    importing = {
+        module.removeprefix("optlight.planning.")
+        for module, targets in _graph().items()
+        if module.startswith("optlight.planning.") and any(t == "optlight.setup" for t, _ in targets)
+    }
+    assert importing <= PLANNING_TAKING_SETUP, sorted(importing - PLANNING_TAKING_SETUP)
+
+
 def test_no_module_imports_another_modules_private_names() -> None:
     private = [
         f"{_module_name(path)}: from {node.module} import {alias.name}"
@@ -139,6 +172,14 @@ def test_no_module_imports_another_modules_private_names() -> None:
         if alias.name.startswith("_")
     ]
     assert not private, private
+
+
+def test_the_trajectory_type_and_jerk_timing_are_below_toppra() -> None:
+    """The Trajectory type (optlight.motion) and the segment path (planning/chord.py) import no
+    timing law; the jerk-limited timing is a peer of the TOPPRA one, not built on it."""
+    for path in (PACKAGE / "motion.py", PACKAGE / "planning" / "chord.py", PACKAGE / "planning" / "jerk.py"):
+        imported = [target for target, _ in _imports(path)]
+        assert "optlight.planning.timing" not in imported and "optlight.planning.jerk" not in imported, path
 
 
 def test_the_trajectory_type_does_not_import_toppra() -> None:
@@ -182,8 +223,9 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
     """One solve with the environment on builds the object mesh, the robot, each objective (camera and
     search resolution), the environment and its CasADi clearance and view functions once: through
     ``optlight.solve`` and through ``optlight solve``, whose preflight builds the Setup the solve uses.
-    The clearance graph twice: every row (the placement NLPs) and the rows that can bind along the path
-    (the trajectory NLP)."""
+    The clearance graph once per row selection: every row (the placement NLPs), the rows that can
+    bind along the path (the trajectory NLP) and, where the start's straight line to the captures is
+    not clear, those of the transfer NLP."""
     from optlight import environment, objectives, scene, setup
     from optlight.scene import objects
 
@@ -204,7 +246,14 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
     count(setup.Scene, "resampled", "search scene")
     count(objectives.Objective, "from_problem", "objective")
     count(environment.Environment, "from_problem", "environment")
-    count(environment.Environment, "_build_clearance", "clearance graph")
+    selections: list[tuple[int, ...] | None] = []
+    real_clearance = environment.Environment._build_clearance
+
+    def recorded(self: environment.Environment, robot: object, rows: object) -> object:
+        selections.append(None if rows is None else tuple(rows))  # type: ignore[call-overload]
+        return real_clearance(self, robot, rows)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(environment.Environment, "_build_clearance", recorded)
     count(environment.Environment, "_build_view", "view graph")
     count(environment, "CollisionModel", "collision model")
     problem = reduced_problem("collision", camera_px=64, landmarks={"count": 4, "resolution": 32})
@@ -221,10 +270,10 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
         "search scene": 1,
         "objective": 2,
         "environment": 1,
-        "clearance graph": 2,
         "view graph": 1,
         "collision model": 1,
     }, counts
+    assert None in selections and len(selections) >= 2 and len(set(selections)) == len(selections), selections
 
 
 def test_installed_package_solves_from_another_folder(tmp_path: Path) -> None:

@@ -11,8 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from optlight.errors import SolverError
+from optlight.motion import Trajectory
 from optlight.planning import timing
-from optlight.planning.timing import Trajectory, time_parameterize
+from optlight.planning.timing import time_parameterize
 
 VMAX = np.array([1.0, 1.5, 0.8])
 AMAX = np.array([3.0, 2.0, 4.0])

@@ -1,4 +1,4 @@
-"""Cameras in the loop (DESIGN §11): a light pose in, a captured image and its exposure out.
+"""Cameras in the loop (docs/design.md §11): a light pose in, a captured image and its exposure out.
 
 A :class:`CaptureCamera` has one method, ``capture(light_position, index) -> Capture``. Three
 implementations:
@@ -88,18 +88,6 @@ def world_light(light: LightSpec, world: WorldSpec) -> LightSpec:
         noise_std=world.noise_std,
         seed=world.seed,
     )
-
-
-def respond(linear: ArrayLike, saturation: float, gamma: float) -> Array:
-    """The camera response Y = s·(clip(I, 0, s)/s)^(1/γ) of linear values I."""
-    u = np.clip(np.asarray(linear, float) / saturation, 0.0, 1.0)
-    return saturation * u ** (1.0 / gamma)
-
-
-def linearise(recorded: ArrayLike, saturation: float, gamma: float) -> Array:
-    """The inverse of :func:`respond`: I = s·(Y/s)^γ, for Y in [0, s]."""
-    u = np.clip(np.asarray(recorded, float) / saturation, 0.0, 1.0)
-    return saturation * u**gamma
 
 
 class ModelCamera:

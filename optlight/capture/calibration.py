@@ -1,4 +1,4 @@
-"""Calibration from captures (DESIGN §11): what the model gets wrong, estimated from what the camera
+"""Calibration from captures (docs/design.md §11): what the model gets wrong, estimated from what the camera
 recorded, and the calibrated model built from it.
 
 The model of a recorded value, pixel p (model point x_p, normal n_p, albedo ρ_p) in capture k
@@ -51,12 +51,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
-from optlight.capture import Array, Capture, linearise, respond
+from optlight.capture import Array, Capture
 from optlight.errors import OptlightError
 from optlight.objectives import Objective
 from optlight.photometric_stereo import recover_normals
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff
+from optlight.scene.response import linearise, respond
 from optlight.setup import Setup
 from optlight.spec import LightSpec, LoopSpec
 
@@ -310,9 +311,9 @@ def _fit(y: Array, used: _Entries, rho: Array, gamma: float, s: float, g: float,
     then (A, B) from the 2 × 2 normal equations of Σ w (L − c ρ (A S + B))², whose entries are
     Σ_p (cρ)² (S2, S1, W) and Σ_p cρ (LS, L1): per-pixel sums over the captures (:class:`_Entries`;
     LS_p = Σ_k w L S, L1_p = Σ_k w L, once per γ), so a sweep costs O(P), not O(K·P). The same
-    solution as summing every entry at every sweep (to ~1e-13: the sums are taken in another order);
-    the default face's loop round spent ~95 % of its time there (36 captures × 29,386 pixels, ~40
-    sweeps per fit, ~75 fits per round): 35 → ~5 s."""
+    solution as summing every entry at every sweep (to ~1e-13: the sums are taken in another order),
+    which on the default face (36 captures × 29,386 pixels, ~40 sweeps per fit, ~75 fits per round)
+    would be nearly all of a loop round's time."""
     linear = linearise(y, s, gamma)
     w = used.weights.astype(float)
     wl = w * linear

@@ -1,7 +1,7 @@
 """The physically based camera: Mitsuba 3 renders the model's mesh in the world of ``[world]``.
 
 Mitsuba is an optional dependency (``pip install 'optlight[mitsuba]'``). The variant is chosen at
-run time (DESIGN §7): ``llvm_ad_rgb`` when Debian's LLVM 19 library is found (``DRJIT_LIBLLVM_PATH``
+run time (docs/design.md §7): ``llvm_ad_rgb`` when Debian's LLVM 19 library is found (``DRJIT_LIBLLVM_PATH``
 is set to it unless already set), ``scalar_rgb`` otherwise; the system's LLVM 14/15 crash the LLVM
 variant, so it is never tried without LLVM 19.
 
@@ -36,9 +36,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optlight.capture import Array, Capture, respond, world_albedo, world_light
+from optlight.capture import Array, Capture, world_albedo, world_light
 from optlight.errors import OptlightError, ProblemError
 from optlight.scene import Scene
+from optlight.scene.response import respond
 from optlight.spec import WorldSpec
 
 #: Where Debian's ``libllvm19`` installs libLLVM (``dpkg -L libllvm19``).
@@ -120,18 +121,44 @@ class MitsubaCamera:
         }
 
     def _bsdf(self, reflectance: dict[str, Any]) -> dict[str, Any]:
+        """The world's BSDF with the diffuse ``reflectance`` (a texture dict; a constant one for
+        roughplastic, see :meth:`_vertex_bsdf`)."""
         w = self.world
         if w.bsdf == "lambertian":
             return {"type": "diffuse", "reflectance": reflectance}
         if w.bsdf == "roughplastic":
-            return {
-                "type": "roughplastic",
-                "distribution": "ggx",
-                "alpha": w.roughness,
-                "diffuse_reflectance": reflectance,
-                "specular_reflectance": {"type": "rgb", "value": [w.specular] * 3},
-            }
+            return self._roughplastic(reflectance)
         return {"type": "principled", "base_color": reflectance, "roughness": w.roughness, "specular": w.specular}
+
+    def _roughplastic(self, reflectance: dict[str, Any]) -> dict[str, Any]:
+        """Mitsuba's roughplastic (GGX, α = roughness) with the diffuse ``reflectance``."""
+        w = self.world
+        return {
+            "type": "roughplastic",
+            "distribution": "ggx",
+            "alpha": w.roughness,
+            "diffuse_reflectance": reflectance,
+            "specular_reflectance": {"type": "rgb", "value": [w.specular] * 3},
+        }
+
+    def _vertex_bsdf(self, top: float) -> dict[str, Any]:
+        """The world's BSDF with the per-vertex diffuse albedo of the mesh attribute ``vertex_color``
+        (3 channels); for roughplastic, of ``vertex_weight`` (1 channel): the albedo over its largest
+        value ``top`` (> 0).
+
+        Mitsuba's roughplastic takes no vertex colours: it weighs its specular and diffuse samples by
+        the reflectance texture's mean, which a mesh attribute does not have. Its BSDF (the linear
+        diffuse term, ``nonlinear`` false) is f_ρ = f_0 + ρ·(f_1 − f_0), so with ρ_max the largest
+        albedo it is the blend (1 − ρ/ρ_max)·f_0 + (ρ/ρ_max)·f_ρmax of two roughplastics of constant
+        reflectance, a ``blendbsdf`` weighted by ``vertex_weight``."""
+        if self.world.bsdf != "roughplastic":
+            return self._bsdf({"type": "mesh_attribute", "name": "vertex_color"})
+        return {
+            "type": "blendbsdf",
+            "weight": {"type": "mesh_attribute", "name": "vertex_weight"},
+            "bsdf_0": self._roughplastic({"type": "uniform", "value": 0.0}),
+            "bsdf_1": self._roughplastic({"type": "uniform", "value": top}),
+        }
 
     def _shape_dict(self) -> Any:
         """The object: Mitsuba's exact sphere for an untextured sphere object, else the mesh with
@@ -144,21 +171,25 @@ class MitsubaCamera:
                 "type": "sphere",
                 "center": np.asarray(center, float).tolist(),
                 "radius": float(radius),
-                "bsdf": self._bsdf({"type": "rgb", "value": [rho] * 3}),
+                # uniform, not rgb: an rgb reflectance must lie in [0, 1], and albedo_scale may pass 1
+                "bsdf": self._bsdf({"type": "uniform", "value": rho}),
             }
         mesh = obj.mesh
         vector = (lambda x: x) if mi.variant().startswith("scalar") else mi.Float
         index = (lambda x: x) if mi.variant().startswith("scalar") else mi.UInt32
+        albedo = world_albedo(mesh.vertices, obj.albedo, w)
+        top = max(float(np.max(albedo, initial=0.0)), 1e-12)
         props = mi.Properties()
-        props["bsdf"] = mi.load_dict(self._bsdf({"type": "mesh_attribute", "name": "vertex_color"}))
+        props["bsdf"] = mi.load_dict(self._vertex_bsdf(top))
         shape = mi.Mesh("object", len(mesh.vertices), len(mesh.faces), props, has_vertex_normals=True)
         params = mi.traverse(shape)
         params["vertex_positions"] = vector(np.asarray(mesh.vertices, np.float32).ravel())
         params["faces"] = index(np.asarray(mesh.faces, np.uint32).ravel())
         params["vertex_normals"] = vector(np.asarray(mesh.vertex_normals, np.float32).ravel())
         params.update()
-        albedo = world_albedo(mesh.vertices, obj.albedo, w)
         shape.add_attribute("vertex_color", 3, vector(np.repeat(albedo, 3).astype(np.float32)))
+        if w.bsdf == "roughplastic":
+            shape.add_attribute("vertex_weight", 1, vector((albedo / top).astype(np.float32)))
         return shape
 
     def _emitter(self, real: Array) -> dict[str, Any]:

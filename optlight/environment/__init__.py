@@ -1,10 +1,10 @@
-"""The robot's environment (issue 7): obstacles, self-collision and the camera's view of the object.
+"""The robot's environment: obstacles, self-collision and the camera's view of the object.
 
 :class:`Environment` is what the planners and the verifier use::
 
     env = Environment.from_problem(problem)
     g = env.clearance_function(robot)     # casadi θ -> distances − margins (≥ 0: clear)
-    v = env.view_cone_function(robot)     # casadi θ -> distances to the view cone (≥ 0: out of view)
+    v = env.view_cone_function(robot)     # casadi θ -> distances to the view cone and the beam (≥ 0: clear)
     report = env.check(robot, thetas, times, capture_times=...)   # exact, coal
 
 Three models of the same geometry, from coarse to exact:
@@ -12,7 +12,9 @@ Three models of the same geometry, from coarse to exact:
 - the NLPs see spheres fitted to each robot body (:mod:`.spheres`; they contain the body's convex
   collision shapes) against analytic obstacles (:mod:`.shapes`): row ``(s, o)`` of the clearance is
   sd_o(c_s(θ)) − r_s − margin, row ``(s, t)`` of two bodies that can collide is
-  |c_s(θ) − c_t(θ)| − r_s − r_t − self_margin, and a view row is sd_cone(c_s(θ)) − r_s;
+  |c_s(θ) − c_t(θ)| − r_s − r_t − self_margin, a view row is sd_cone(c_s(θ)) − r_s, and a beam
+  row is sd_beam(c_s(θ); a(θ)) − r_s, the beam's cone from the light a(θ) to the object
+  (:class:`BeamCone`): what blocks the beam at a capture is planned around as what blocks the view;
 - :meth:`Environment.sphere_clearance` evaluates the same rows with NumPy and pinocchio's kinematics
   (the reference the CasADi graph is tested against);
 - :meth:`Environment.check` computes exact distances with coal between the robot's collision shapes,
@@ -23,7 +25,9 @@ Obstacles of a problem (``[environment]``): the object's bounding sphere ("objec
 ``table_height_m``, "table"), the camera body (a box behind the camera centre, camera axes,
 "camera_body") and its stand (a vertical cylinder from the body's lowest point down to the table, or
 to z = 0, "camera_stand"), and the boxes, cylinders and spheres listed. The view cone is
-:class:`ViewCone` around the object's bounding sphere, half-angle asin(R/d) + ``view_margin_deg``.
+:class:`ViewCone` around the object's bounding sphere, half-angle asin(R/d) + ``view_margin_deg``;
+with it, the beam :class:`BeamCone` from the light to the same sphere, the same margin, starting
+beyond the housing's radius (where the exact beam check starts its rays).
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ from optlight.environment.collision import LIGHT, VIEW_CONE, CollisionModel, rob
 from optlight.environment.shapes import (
     SMOOTHING_M,
     Ball,
+    BeamCone,
     Box,
     Cylinder,
     HalfSpace,
@@ -69,6 +74,7 @@ __all__ = [
     "OBJECT",
     "VIEW_CONE",
     "Ball",
+    "BeamCone",
     "Box",
     "CollisionModel",
     "Cylinder",
@@ -96,7 +102,10 @@ CAPTURE_SLACK = 0.002
 #: Name of the obstacle that stands for the object: its bounding sphere (the object's mesh is drawn).
 OBJECT = "object"
 
-RESERVED_NAMES = (OBJECT, "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE)
+#: Name of the light's beam in row labels.
+BEAM = "beam"
+
+RESERVED_NAMES = (OBJECT, "table", "camera_body", "camera_stand", LIGHT, VIEW_CONE, BEAM)
 
 
 def listed_obstacles(spec: EnvironmentSpec) -> list[tuple[str, Obstacle]]:
@@ -163,7 +172,8 @@ class Environment:
 
     Attributes: ``obstacles`` (tuple of shapes with ``name``), ``view_cone`` (:class:`ViewCone`, or
     None when ``view_mode`` is "off"), ``view_mode`` ("off", "capture", "path"), ``margin`` and
-    ``self_margin`` (m), ``housing`` (the light housing's coal shape) and ``housing_offset`` (m, its
+    ``self_margin`` (m), ``beam`` (:class:`BeamCone`, None when the view is off), ``housing`` (the
+    light housing's coal shape) and ``housing_offset`` (m, its
     centre behind the light frame along −z), ``spheres_per_link``, ``collisions`` (obstacles and
     self-collision modelled: ``[environment] enabled``; without them only the view is).
     """
@@ -180,12 +190,16 @@ class Environment:
         housing_offset: float,
         spheres_per_link: int,
         collisions: bool = True,
+        beam: BeamCone | None = None,
     ) -> None:
         names = [o.name for o in obstacles]
         if len(set(names)) != len(names):
             raise ValueError(f"obstacle names must be unique, got {names}")
         if view_mode not in ("off", "capture", "path") or (view_mode != "off") != (view_cone is not None):
             raise ValueError(f"view_mode {view_mode!r} does not match the view cone {view_cone}")
+        if beam is not None and view_cone is None:
+            raise ValueError("the beam is planned with the view: no beam without a view cone")
+        self.beam = beam
         self.obstacles = tuple(obstacles)
         self.view_cone = view_cone
         self.view_mode = view_mode
@@ -238,10 +252,11 @@ class Environment:
                 )
         obstacles += [obs for _, obs in listed_obstacles(spec)]
         view = problem.view
-        cone = None
+        cone, beam = None, None
+        light = problem.light
         if view.mode != "off":
             cone = ViewCone.around(camera.position, center, radius, math.radians(view.margin_deg))
-        light = problem.light
+            beam = BeamCone(center, radius, math.radians(view.margin_deg), light.housing_radius_m)
         if light.housing == "cylinder":
             housing, offset = (
                 coal.Cylinder(light.housing_radius_m, light.housing_length_m),
@@ -259,6 +274,7 @@ class Environment:
             housing_offset=offset,
             spheres_per_link=spec.spheres_per_link,
             collisions=spec.enabled,
+            beam=beam,
         )
 
     # ------------------------------------------------------------------ robot models
@@ -288,13 +304,16 @@ class Environment:
         own = [f"{sp.label(s)} ↔ {sp.label(t)}" for s, t in cm.self_rows]
         return obs + own
 
-    def view_labels(self, robot: Robot) -> list[str]:
-        """One label per row of :meth:`view_cone_function`: ``"<body>[i] ↔ view_cone"`` (empty when
-        the view cone is off)."""
+    def view_labels(self, robot: Robot, *, beam: bool = True) -> list[str]:
+        """One label per row of :meth:`view_cone_function`: ``"<body>[i] ↔ view_cone"``, then (with
+        ``beam``) ``"<body>[i] ↔ beam"`` (empty when the view cone is off)."""
         if self.view_cone is None:
             return []
         cm = self.collision_model(robot)
-        return [f"{cm.spheres.label(s)} ↔ {VIEW_CONE}" for s in cm.view_rows]
+        labels = [f"{cm.spheres.label(s)} ↔ {VIEW_CONE}" for s in cm.view_rows]
+        if beam and self.beam is not None:
+            labels += [f"{cm.spheres.label(int(s))} ↔ {BEAM}" for s in cm.beam_rows]
+        return labels
 
     def worst_sphere_row(self, robot: Robot, theta: ArrayLike) -> tuple[float, str]:
         """The smallest row of :meth:`sphere_clearance` at θ (rad), clearance and view rows together,
@@ -363,27 +382,34 @@ class Environment:
     def clearance_values(self, robot: Robot, thetas: ArrayLike) -> Array:
         """(K, m): the clearance rows of :meth:`sphere_clearance` (m) at each of ``thetas`` (K, n),
         rad; with no configuration, (0, m)."""
-        values = [self.sphere_clearance(robot, theta)[0] for theta in np.atleast_2d(thetas)]
+        values = [self.sphere_clearance(robot, theta, beam=False)[0] for theta in np.atleast_2d(thetas)]
         if values:
             return np.array(values)
         cm = self.collision_model(robot)
         return np.zeros((0, len(cm.obstacle_rows) + len(cm.self_rows)))
 
-    def view_cone_function(self, robot: Robot) -> ca.Function:
+    def view_cone_function(self, robot: Robot, *, beam: bool = True) -> ca.Function:
         """``casadi.Function("view_clearance", [theta (n×1)], [v (m×1)])``: per robot sphere that can
         reach the cone (:attr:`CollisionModel.view_rows`, the light's included), its signed distance to
-        the view cone minus its radius (m); v ≥ 0 means out of the camera's view of the object.
-        Raises ValueError when ``view_mode`` is "off". Built once per robot."""
+        the view cone minus its radius (m); then, with ``beam`` (the light at a capture), per sphere
+        not carried with the light (:attr:`CollisionModel.beam_rows`) its signed distance to the beam
+        from the light a(θ) minus its radius. v ≥ 0 means out of the camera's view of the object and
+        out of the light's beam onto it. Raises ValueError when ``view_mode`` is "off". Built once per
+        robot."""
         if self.view_cone is None:
             raise ValueError("the view cone is off (environment.view_cone = 'off')")
-        return self._cached(robot, "view", lambda: self._build_view(robot))
+        with_beam = beam and self.beam is not None
+        return self._cached(robot, "view+beam" if with_beam else "view", lambda: self._build_view(robot, with_beam))
 
-    def _build_view(self, robot: Robot) -> ca.Function:
+    def _build_view(self, robot: Robot, beam: bool) -> ca.Function:
         assert self.view_cone is not None
         cm = self.collision_model(robot)
         theta = ca.SX.sym("theta", robot.n)
         centers = self._symbolic_centers(robot, cm.spheres, theta)
         rows = [self.view_cone.signed_distance_sx(centers[s]) - cm.spheres.radii[s] for s in cm.view_rows]
+        if beam and self.beam is not None:
+            apex = robot.symbolic_light_pose(theta)[0]
+            rows += [self.beam.signed_distance_sx(centers[s], apex) - cm.spheres.radii[s] for s in cm.beam_rows]
         out = ca.vertcat(*rows) if rows else ca.SX(0, 1)
         return ca.Function("view_clearance", [theta], [out], ["theta"], ["view_clearance"], {"cse": True})
 
@@ -399,9 +425,9 @@ class Environment:
             poses[int(j)] = (p, r)
         return spheres.symbolic_centers(poses)
 
-    def sphere_clearance(self, robot: Robot, theta: ArrayLike) -> tuple[Array, Array]:
-        """NumPy twin of :meth:`clearance_function` and :meth:`view_cone_function` at one θ (rad),
-        from pinocchio's kinematics: (clearance rows (m,), view rows) in m."""
+    def sphere_clearance(self, robot: Robot, theta: ArrayLike, *, beam: bool = True) -> tuple[Array, Array]:
+        """NumPy twin of :meth:`clearance_function` and :meth:`view_cone_function` (``beam`` the
+        same) at one θ (rad), from pinocchio's kinematics: (clearance rows (m,), view rows) in m."""
         cm = self.collision_model(robot)
         sp = cm.spheres
         c = sp.world_centers(robot.model, robot.data, robot.to_pin(theta))
@@ -419,6 +445,9 @@ class Environment:
             if self.view_cone is not None
             else np.zeros(0)
         )
+        if beam and self.beam is not None:
+            apex = robot.light_pose(theta)[0]
+            view = np.concatenate([view, self.beam.signed_distance(c[cm.beam_rows], apex) - r[cm.beam_rows]])
         return clearance, view
 
     # ------------------------------------------------------------------ exact checks

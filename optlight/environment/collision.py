@@ -130,7 +130,8 @@ class CollisionModel:
     (tuple of :class:`Body`, robot links then the light); ``obstacles``; ``view_cone`` (or None);
     ``pairs`` (tuple of :class:`Pair`); ``ignored_self_pairs`` (body-name pairs in contact at θ_ref);
     ``spheres`` (:class:`RobotSpheres`, same body order); ``obstacle_rows`` ((S_o, 2) int: sphere,
-    obstacle index), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``view_rows`` (sphere indices);
+    obstacle index), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``view_rows`` (sphere indices),
+    ``beam_rows`` (sphere indices: those not on the light's joint);
     ``motion_weights`` (G, n): ρ such that a point of geometry g moves at most Σ_i ρ[g, i] |Δθ_i|
     between two configurations (m per rad, or m per m for prismatic joints).
     """
@@ -237,6 +238,10 @@ class CollisionModel:
             )
         )
         self.obstacle_rows, self.view_rows = self._reachable_rows()
+        # The beam: every sphere but those carried with the light (they stand where they stand
+        # relative to its beam at any θ, so no plan can move them out of it).
+        light_joint = int(model.frames[robot.light_frame_id].parentJoint)
+        self.beam_rows = np.flatnonzero(self.spheres.joint != light_joint)
         body_index = {b.name: i for i, b in enumerate(self.bodies)}
         self_bodies = sorted(
             {

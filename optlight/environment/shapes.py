@@ -15,7 +15,7 @@ more than ε²/(2|·|) (negligible) and keeps gradients finite:
 
 Each sd is 1-Lipschitz, so sd(p) ≥ sd(o) − |p − o| bounds it from any point o (used to drop pairs
 that can never come close). :meth:`coal_geometry` and :attr:`placement` give the exact shape for
-coal (DESIGN §7: pinocchio's GeometryModel), in the world frame.
+coal (docs/design.md §8: pinocchio's GeometryModel), in the world frame.
 
 The view cone (:class:`ViewCone`) is the cone with apex at the camera centre C, axis u = (O − C)/d
 (d = |O − C|), half-angle α = asin(R/d) + margin around the object's bounding sphere (centre O,
@@ -193,6 +193,31 @@ def rotation_rpy_deg(rpy_deg: ArrayLike) -> Array:
     return np.asarray(pin.rpy.rpyToMatrix(r, p, y))
 
 
+def cone_signed_distance(
+    v: Array, axis: Array, half_angle: float, length: float, near: float = 0.0
+) -> Array:
+    """sd (N,) in m of the points v (N, 3), taken from the apex, to the cone of unit ``axis``,
+    half-angle α (rad), cut at the planes a = ``near`` and a = ``length`` (m) along the axis: in the
+    (axial a = vᵀu, radial r = |v − a u|) half-plane, sd = max(r cos α − a sin α, a − L, near − a),
+    r smoothed as sqrt(r² + ε²) (:class:`ViewCone`)."""
+    a = v @ axis
+    perp = v - a[:, None] * axis
+    r = np.sqrt(np.sum(perp * perp, axis=1) + SMOOTHING_M**2)
+    side = r * math.cos(half_angle) - a * math.sin(half_angle)
+    return np.maximum(np.maximum(side, a - length), near - a)
+
+
+def cone_signed_distance_sx(
+    v: ca.SX, axis: ca.SX | ca.DM, half_angle: ca.SX | float, length: ca.SX | float, near: ca.SX | float = 0.0
+) -> ca.SX:
+    """The same for a CasADi 3×1 point v from the apex; axis, angle and lengths may be expressions."""
+    a = ca.dot(axis, v)
+    perp = v - a * axis
+    r = ca.sqrt(ca.sumsqr(perp) + SMOOTHING_M**2)
+    side = r * ca.cos(half_angle) - a * ca.sin(half_angle)
+    return ca.fmax(ca.fmax(side, a - length), near - a)
+
+
 @dataclass(frozen=True)
 class ViewCone:
     """The camera's view of the object (module docstring): apex ``apex`` = C (m, world), unit
@@ -230,21 +255,13 @@ class ViewCone:
 
     def signed_distance(self, points: ArrayLike) -> Array:
         """sd (N,) in m of world points (N, 3) to the cone (class docstring); < 0 inside."""
-        v = _points(points) - self.apex
-        a = v @ self.axis
-        perp = v - a[:, None] * self.axis
-        r = np.sqrt(np.sum(perp * perp, axis=1) + SMOOTHING_M**2)
-        side = r * math.cos(self.half_angle) - a * math.sin(self.half_angle)
-        return np.maximum(np.maximum(side, a - self.length), -a)
+        return cone_signed_distance(_points(points) - self.apex, self.axis, self.half_angle, self.length)
 
     def signed_distance_sx(self, point: ca.SX) -> ca.SX:
         """The same for a CasADi 3×1 world point."""
-        v = point - ca.DM(self.apex)
-        a = ca.dot(ca.DM(self.axis), v)
-        perp = v - a * ca.DM(self.axis)
-        r = ca.sqrt(ca.sumsqr(perp) + SMOOTHING_M**2)
-        side = r * math.cos(self.half_angle) - a * math.sin(self.half_angle)
-        return ca.fmax(ca.fmax(side, a - self.length), -a)
+        return cone_signed_distance_sx(
+            point - ca.DM(self.apex), ca.DM(self.axis), self.half_angle, self.length
+        )
 
     def coal_geometry(self) -> coal.CollisionGeometry:
         """coal's cone: base radius L tan α, height L, apex at +L/2 on its own z axis."""
@@ -259,3 +276,44 @@ class ViewCone:
         x /= np.linalg.norm(x)
         rot = np.column_stack([x, np.cross(z, x), z])
         return pin.SE3(rot, self.apex + 0.5 * self.length * self.axis)
+
+
+#: Largest R/d of the beam's half-angle asin(R/d): the light nearer the object than its bounding
+#: sphere (never at a capture; a configuration off the path may put it there) keeps a finite cone.
+BEAM_MAX_SINE = 0.99
+
+
+@dataclass(frozen=True)
+class BeamCone:
+    """The light's beam onto the object: the cone from the light's emitting point a (the apex, which
+    moves with the robot) to the object's bounding sphere (``center`` O, ``radius`` R, m), axis
+    u = (O − a)/d, d = |O − a|, half-angle α = asin(R/d) + ``margin`` (rad), cut at the plane through
+    O and at a = ``skip`` cos α from the apex: the exact check casts the beam's rays from ``skip`` m
+    beyond a (the housing's radius), and every point of the cone nearer than ``skip`` cos α along
+    the axis is within ``skip`` of a. Whatever else is inside it stands between the light and the
+    lit side of the object. Signed distance: :func:`cone_signed_distance` (the view cone's); R/d is
+    capped at :data:`BEAM_MAX_SINE`."""
+
+    center: Array
+    radius: float
+    margin: float
+    skip: float
+
+    def _cone(self, apex: Array) -> tuple[Array, float, float]:
+        """(u, α, d) for the apex (3,) in m."""
+        to_center = self.center - apex
+        d = max(float(np.linalg.norm(to_center)), SMOOTHING_M)
+        return to_center / d, math.asin(min(self.radius / d, BEAM_MAX_SINE)) + self.margin, d
+
+    def signed_distance(self, points: ArrayLike, apex: ArrayLike) -> Array:
+        """sd (N,) in m of world points (N, 3) to the beam from ``apex`` (3,) (m); < 0 inside."""
+        a = np.asarray(apex, float).reshape(3)
+        axis, alpha, d = self._cone(a)
+        return cone_signed_distance(_points(points) - a, axis, alpha, d, self.skip * math.cos(alpha))
+
+    def signed_distance_sx(self, point: ca.SX, apex: ca.SX) -> ca.SX:
+        """The same for CasADi 3×1 world points ``point`` and ``apex`` (the light's position)."""
+        to_center = ca.DM(self.center) - apex
+        d = ca.fmax(ca.sqrt(ca.sumsqr(to_center)), SMOOTHING_M)
+        alpha = ca.asin(ca.fmin(self.radius / d, BEAM_MAX_SINE)) + self.margin
+        return cone_signed_distance_sx(point - apex, to_center / d, alpha, d, self.skip * ca.cos(alpha))

@@ -1,4 +1,4 @@
-"""Exact view and beam check at the captures: rays against the robot's collision meshes (DESIGN §9).
+"""Exact view and beam check at the captures: rays against the robot's collision meshes (docs/design.md §9).
 
 Written independently of the planners' sphere and cone models (:mod:`optlight.environment.spheres`,
 :class:`optlight.environment.shapes.ViewCone`): nothing here approximates the robot or the view.

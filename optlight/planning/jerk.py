@@ -5,10 +5,10 @@ its acceleration steps between gridpoints: unbounded jerk, which a Franka contro
 (``joint_motion_generator_acceleration_discontinuity``) and which ROS 2's quintic interpolation
 cannot follow. Here every landmark-to-landmark segment, which starts and ends at rest, is timed by a
 jerk-limited profile of its path parameter, computed by ruckig (its free version plans state to state,
-which is all a rest-to-rest segment needs; DESIGN §7).
+which is all a rest-to-rest segment needs; docs/design.md §7).
 
 **Path.** The same geometric path as TOPPRA's: the not-a-knot cubic spline q(s) through the
-waypoints over the cumulative chord length s ∈ [0, L] (:func:`optlight.planning.timing.chord_path`).
+waypoints over the cumulative chord length s ∈ [0, L] (:func:`optlight.planning.chord.chord_path`).
 It is C²: q″ is continuous, q‴ is constant between knots.
 
 **Profile.** s(t) rest to rest from 0 to L with 0 ≤ ṡ ≤ V, |s̈| ≤ A, |s⃛| ≤ J (ruckig's time-optimal
@@ -50,7 +50,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from optlight.errors import SolverError
-from optlight.planning.timing import Trajectory, as_bounds, assemble_trajectory, chord_path, positive_limits
+from optlight.motion import Trajectory, assemble_trajectory, positive_limits
+from optlight.planning.chord import as_bounds, chord_path
 
 Array = NDArray[np.float64]
 
@@ -97,6 +98,39 @@ def rest_to_rest_duration(length: ArrayLike, v: ArrayLike, a: ArrayLike, j: Arra
     w = np.where(w_full >= a**2 / j, w_full, w_tri)
     t_w, _ = ramp(np.minimum(w, v))
     return np.where(cruise, 2 * t_v + (length - 2 * d_v) / v, 2 * t_w)
+
+
+def rest_to_rest_moves(
+    postures: ArrayLike, velocity_limit: ArrayLike, acceleration_limit: ArrayLike, jerk_limit: ArrayLike
+) -> Array:
+    """(P − 1,) the shortest times (s) of the moves between consecutive postures (P, n) (rad), each
+    from rest to rest under |q̇_j| ≤ v_j, |q̈_j| ≤ a_j, |q⃛_j| ≤ j_j: ruckig's time-optimal multi-joint
+    state-to-state trajectory, which from rest to rest takes the slowest joint's double-S time.
+
+    A lower bound on any motion through the same postures in the same order that stops at each of
+    them, whatever its path: a path between two postures is at least as long in every joint as the
+    straight one, and a joint's double-S profile is the fastest way over a distance."""
+    q = np.asarray(postures, float)
+    if q.ndim != 2 or q.shape[0] < 1:
+        raise ValueError(f"postures must be a (P, n) array, got shape {q.shape}")
+    n = q.shape[1]
+    vmax, amax, jmax = (
+        positive_limits(x, n, name)
+        for x, name in ((velocity_limit, "velocity_limit"), (acceleration_limit, "acceleration_limit"), (jerk_limit, "jerk_limit"))
+    )
+    otg = ruckig.Ruckig(n)
+    inp = ruckig.InputParameter(n)
+    inp.max_velocity, inp.max_acceleration, inp.max_jerk = vmax.tolist(), amax.tolist(), jmax.tolist()
+    inp.current_velocity = inp.current_acceleration = inp.target_velocity = inp.target_acceleration = [0.0] * n
+    out = np.zeros(max(q.shape[0] - 1, 0))
+    for k in range(out.size):
+        inp.current_position, inp.target_position = q[k].tolist(), q[k + 1].tolist()
+        trajectory = ruckig.Trajectory(n)
+        result = otg.calculate(inp, trajectory)
+        if result not in (ruckig.Result.Working, ruckig.Result.Finished):
+            raise SolverError(f"move {k}: ruckig returned {result}")
+        out[k] = trajectory.duration
+    return out
 
 
 def path_bounds(

@@ -1,4 +1,4 @@
-"""Landmarks (paper Section 4, DESIGN §5): where on the light sphere the light should go.
+"""Landmarks (paper Section 4, docs/design.md §5): where on the light sphere the light should go.
 
 Azimuth mode (the paper's). For ``M`` equally spaced azimuths ``φ_j = 2πj/M`` find
 
@@ -19,7 +19,7 @@ light at ``a(θ, φ_j)``. ``D`` is multimodal in θ, so per azimuth:
    is fixed, so a derivative-free 1-D search converges in ~10 renders. A seed on an end of the
    allowed zeniths that ``D`` rises from (``D`` at :data:`REFINE_TOL` inside, mask fixed, above the
    seed's) is not searched: the search would end on it within its tolerance (the default face's
-   landmarks lie on the view's boundary: its search 0.68 → 0.61 s, every landmark the same);
+   landmarks lie on the view's boundary, so skipping those seeds saves a tenth of its search);
 4. *select*: the best sweep sample and the refined zeniths are scored with the NumPy renderer and
    shadow rays; the lowest wins, so the landmark is never worse than the best sweep sample;
 5. *polish* (only when the search resolution is below the camera's): one parabolic step of the
@@ -591,8 +591,8 @@ def _azimuth_mode(search: _Search, progress: Progress | None, found: Callable[[L
 
     # The next azimuth's shadow rays are cast in the background while this one's sweep objective,
     # refinement and camera-resolution scores are computed here: ~12 ms of rays there against
-    # ~16 ms here on the default face (with the objective there too, the background took ~15 ms
-    # against ~10 ms here, and this thread waited). The same numbers either way.
+    # ~16 ms here on the default face (with the objective there too, the background would take ~15 ms
+    # against ~10 ms here, and this thread would wait). The same numbers either way.
     pending = in_background(partial(shadows, 0, False))
     pole: tuple[float, Array] | None = None
     t0 = time.perf_counter()

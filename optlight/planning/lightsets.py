@@ -1,7 +1,7 @@
-"""Light sets (DESIGN §10): objectives that score N lights together, and their design.
+"""Light sets (docs/design.md §10): objectives that score N lights together, and their design.
 
 A light set is N unit directions ``d_i`` from the object centre O towards the lights, in the light
-sphere's frame S (DESIGN §2: ``z_S`` towards the camera, so zenith 0 is frontal light). The decision
+sphere's frame S (docs/design.md §2: ``z_S`` towards the camera, so zenith 0 is frontal light). The decision
 variables are the angles ``x = (θ_1 … θ_N, φ_1 … φ_N)`` (rad) with
 ``d_i = (sinθ_i cosφ_i, sinθ_i sinφ_i, cosθ_i)``, each zenith on the allowed cap
 ``θ_min ≤ θ_i ≤ θ_max`` (:class:`Cap`). ``D`` is the N×3 matrix whose rows are the ``d_i``.
@@ -590,21 +590,30 @@ def design_light_set(
     allowed: AllowedHook | None = None,
     solver: SolverSpec | None = None,
     designer: LightSetDesigner | None = None,
+    start_pool: ArrayLike | None = None,
 ) -> LightSetResult:
     """The best of several solves of the set NLP (:class:`LightSetDesigner`, built once).
 
     Starts: ``start`` (N, 3) directions on the cap when given (then it is the only start), else
-    ``starts`` sets drawn uniformly on the cap's area with ``np.random.default_rng(seed)``. A
-    ``designer`` built before for the same objective, N and cap is reused. Returns the start with the
-    lowest final cost; ``start_costs`` lists every start's."""
+    ``starts`` sets drawn with ``np.random.default_rng(seed)``: N distinct directions of
+    ``start_pool`` (P ≥ N, 3; on the cap) each when given — where ``allowed`` holds, so that IPOPT
+    starts feasible (from uniform starts on the cap it reported a thin band of reachable lights
+    infeasible) — else uniformly on the cap's area. A ``designer`` built before for the same
+    objective, N and cap is reused. Returns the start with the lowest final cost; ``start_costs``
+    lists every start's."""
     if designer is None:
         designer = LightSetDesigner(objective, n, cap, solver, allowed)
     elif designer.n != n or designer.cap != cap or designer.objective is not objective:
         raise OptlightError("the designer was built for another objective, light count or cap")
+    rng = np.random.default_rng(seed)
     if start is not None:
         candidates = [check_in_cap(start, cap)]
+    elif start_pool is not None:
+        pool = check_in_cap(start_pool, cap)
+        if len(pool) < n:
+            raise OptlightError(f"{len(pool)} start directions for a set of {n} lights")
+        candidates = [pool[rng.choice(len(pool), n, replace=False)] for _ in range(max(1, starts))]
     else:
-        rng = np.random.default_rng(seed)
         candidates = [cap.random(n, rng) for _ in range(max(1, starts))]
     results = [designer.solve(s) for s in candidates]
     best = min(results, key=lambda r: (not r.success, r.cost))
@@ -892,7 +901,33 @@ def grid_from_problem(problem: Problem) -> Grid:
     spec = problem.lightset
     file = str(problem.source) if problem.source else "<inline>"
     if spec.grid_deg is not None:
-        return grid_from_degrees(spec.grid_deg)
+        return _distinct_grid(grid_from_degrees(spec.grid_deg), file, "lightset.grid_deg", "grid_deg[{}]", 0)
     if spec.grid_file is not None:
-        return read_grid_file(problem.resolve(spec.grid_file), file, "lightset.grid_file")
+        key = "lightset.grid_file"
+        grid = read_grid_file(problem.resolve(spec.grid_file), file, key)
+        return _distinct_grid(grid, file, key, f"{Path(spec.grid_file).name} data row {{}}", 1)
     return yale_b_grid()
+
+
+#: Grid directions closer than this (rad) are the same light: one capture cannot stand for two.
+SAME_DIRECTION_RAD = 1e-9
+
+
+def _distinct_grid(grid: Grid, file: str, key: str, entry: str, first: int) -> Grid:
+    """``grid`` when no two of its directions are the same light (within :data:`SAME_DIRECTION_RAD`);
+    else a :class:`ProblemError` naming ``file``, ``key`` and the first two such entries (``entry``
+    formatted with their index counted from ``first``)."""
+    d = grid.directions
+    cross = np.linalg.norm(np.cross(d[:, None, :], d[None, :, :]), axis=2)
+    angle = np.arctan2(cross, d @ d.T)
+    same = np.argwhere(np.triu(angle <= SAME_DIRECTION_RAD, k=1))
+    if same.size:
+        i, j = same[0]
+        raise ProblemError(
+            file,
+            key,
+            "distinct light directions (a grid light is one capture)",
+            f"{entry.format(i + first)} ({grid.names[i]}) and {entry.format(j + first)} ({grid.names[j]}) "
+            "are the same direction",
+        )
+    return grid

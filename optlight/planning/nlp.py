@@ -5,7 +5,7 @@ The landmark refiners (:mod:`.landmarks`), the joint-space placement and the cle
 cost. Written once here, so that "the light is on the sphere and aimed at O" or "the light is pinned
 at a*" means the same expression in every NLP:
 
-- :func:`light_rows` h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ (m, DESIGN §3), 3 equality rows;
+- :func:`light_rows` h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ (m, docs/design.md §3), 3 equality rows;
 - :func:`pin_rows` t₁ᵀ (a − a*), t₂ᵀ (a − a*) (m): the light at a* to first order on the sphere,
   2 equality rows, with t₁, t₂ from :func:`tangent_basis` at a*;
 - :func:`arc_rows` nᵀ(a − O) (on the great circle of normal n, 1 equality) and the two wedge rows
@@ -95,9 +95,9 @@ def knot_nlp_options(solver: SolverSpec, **overrides: Any) -> dict[str, Any]:
     Hessian (theirs is :func:`knot_derivatives`'), and MUMPS without its permuting scaling
     (``mumps_permuting_scaling = 0``: MC64's maximum transversal, recomputed at every
     factorization). Their KKT systems hold thousands of clearance rows; on table_wall the scaling
-    took ~30 % of the trajectory NLP's and the transfers' time, and without it they take the same
+    takes ~30 % of the trajectory NLP's and the transfers' time, and without it they take the same
     iterations to the same knots (to 4e-15 rad) on the built-in problems. The one-posture and
-    landmark NLPs keep MUMPS's default: there it changed their way through the iterations."""
+    landmark NLPs keep MUMPS's default: there it changes their way through the iterations."""
     return ipopt_options(
         solver, ipopt__hessian_approximation="exact", ipopt__mumps_permuting_scaling=0, **overrides
     )
@@ -291,8 +291,8 @@ def row_hessian(function: ca.Function) -> ca.Function:
     out = sx(theta, *args)
     lam = ca.SX.sym("lam", out.size1())
     hessian = ca.hessian(ca.dot(lam, out), theta)[0]
-    # no common-subexpression pass: on an environment's rows it took 0.1 s of a window's build and
-    # saved 7 % of the instructions (the same time per evaluation)
+    # no common-subexpression pass: on an environment's rows it takes 0.1 s of a window's build and
+    # saves 7 % of the instructions (the same time per evaluation)
     return ca.Function(f"{sx.name()}_hessian", [theta, *args, lam], [hessian])
 
 
@@ -321,17 +321,19 @@ def environment_rows(
     theta: Symbolic,
     *,
     view: bool = True,
+    beam: bool = True,
     clearance_rows: Sequence[int] | None = None,
 ) -> Symbolic:
     """[c(θ); v(θ)] (m, ≥ 0 is clear): the environment's clearance rows (when it models collisions;
     only ``clearance_rows`` of them when given, e.g. those that can bind), then (``view`` and
-    the view cone on) its view rows; the CasADi functions are the environment's, built once per robot
-    and row selection."""
+    the view cone on) its view rows, the beam's included with ``beam`` (the light on the sphere,
+    aimed at the object); the CasADi functions are the environment's, built once per robot and row
+    selection."""
     rows = []
     if environment.collisions:
         rows.append(environment.clearance_function(robot, clearance_rows)(theta))
     if view and environment.view_cone is not None:
-        rows.append(environment.view_cone_function(robot)(theta))
+        rows.append(environment.view_cone_function(robot, beam=beam)(theta))
     return ca.vertcat(*rows) if rows else ca.MX(0, 1)
 
 

@@ -2,7 +2,7 @@
 
 Landmarks are joined by great-circle arcs (slerp of unit vectors from O), sampled with knots at most
 ``knot_spacing`` rad apart. The light's optical axis points at O; its roll is carried along the path
-by parallel transport, so it never flips (DESIGN §3: never build the frame from a × b̂).
+by parallel transport, so it never flips (docs/design.md §3: never build the frame from a × b̂).
 """
 
 from __future__ import annotations

@@ -1,11 +1,11 @@
-"""Joint-space light placement (DESIGN §5, the design's NLP): the best light the robot can reach.
+"""Joint-space light placement (docs/design.md §5, the design's NLP): the best light the robot can reach.
 
 Variables: the joint angles θ (n, rad). With a(θ), R(θ) the light's position (m) and rotation from the
 symbolic forward kinematics (:attr:`Robot.symbolic_light_pose`) and u(θ) = R_WSᵀ (a(θ) − O) / b the
 light's direction in the sphere frame (unit when h = 0):
 
     min_θ  D̃(a(θ), v)
-    s.t.   h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0              on the sphere, aimed at O (DESIGN §3)
+    s.t.   h(θ) = R(θ)ᵀ (O − a(θ)) − [0, 0, b]ᵀ = 0              on the sphere, aimed at O (docs/design.md §3)
            −sin φ u_x + cos φ u_y = 0,   cos φ u_x + sin φ u_y ≥ 0   in the half-plane of azimuth φ
            cos θ_max ≤ u_z ≤ cos θ_min                             the allowed zenith range
            c(θ) ≥ s,   v(θ) ≥ s                                     clearance, view (environment on)
@@ -22,7 +22,8 @@ environment (:class:`~optlight.environment.Environment`) join: the clearance c(�
 the obstacles minus ``margin``, sphere pairs of the self pairs minus ``self_margin``) and, unless the
 view cone is off, the view rows v(θ) (m; signed distance of the robot's spheres to the camera's view
 cone minus their radii) — a landmark is a capture, so the view cone is kept clear in both of its
-modes; each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
+modes (the light's beam onto the object, the view rows' second part, is checked on the placement's
+result and held by the clear posture, :class:`ClearPosture`); each row at least s = :data:`~optlight.environment.CAPTURE_SLACK`, so that the trajectory NLP
 (rows ≥ 0) starts inside its feasible set (where no light of the azimuth keeps s: on the rows'
 bounds, :meth:`LightPlacement._margined`). A landmark whose light the robot only reaches by
 colliding or blocking the camera then moves along its azimuth to the best light it reaches clear of
@@ -31,10 +32,8 @@ not do that itself. The clearance rows are those that can bind, as the trajector
 (:func:`~optlight.planning.trajectory.solve_active_rows`, one posture): those below
 :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at the warm start, more when the solution
 breaks one left out, all in the last solve. With L-BFGS, IPOPT's time per iteration grows with the
-rows: the scaling benchmark's obstacles give 206 clearance rows, ~26 of them near a posture, and
-its 576 captures among 3 obstacles replayed the same 98 placements from the same starts in 14.9 s
-instead of 20.2 s (61 of the 64 both solved to the same cost, one cheaper, two dearer; 69
-successes instead of 68).
+rows: of the scaling benchmark's 206 clearance rows among its obstacles, ~26 are near a posture,
+so taking only those makes each placement solve markedly cheaper for the same solutions.
 
 Azimuth free. The same solver with both azimuth rows switched off through their bounds
 (−∞ ≤ g ≤ ∞): one graph and one ``nlpsol`` per row set, as
@@ -216,9 +215,9 @@ class LightPlacement:
         side = ca.cos(phi) * u[0] + ca.sin(phi) * u[1]
         self.objective_scale = _objective_scale(self.search, self.search_objective)
         # As for ClearPosture: most solves that fail are of an azimuth the arm cannot hold clear, and
-        # IPOPT told to expect that gives up sooner, out of its costly restoration phase (the scaling
-        # benchmark's 144 captures with 3 obstacles: 49 solves, 2585 -> 1245 iterations, 29 s ->
-        # 10 s, the same 33 succeeding and the same plan)
+        # IPOPT told to expect that gives up sooner, out of its costly restoration phase (on the
+        # scaling benchmark's 144 captures with 3 obstacles, half the iterations and a third of the
+        # time, the same solves succeeding and the same plan)
         self._options = ipopt_options(
             setup.solver,
             ipopt__obj_scaling_factor=self.objective_scale,
@@ -252,7 +251,10 @@ class LightPlacement:
                 clearance = env.clearance_function(self.robot)
                 rows.append(clearance(theta) if active is None else selected_rows(clearance, theta, [0], 0, active)[0])
             if env is not None and env.view_cone is not None:
-                rows.append(env.view_cone_function(self.robot)(theta))
+                # the beam's rows are left to the check of the result (worst_sphere_row) and the
+                # clear posture: started from the IK's posture of a light out of reach, the arm
+                # stretched through the beam, IPOPT reported the placement infeasible (point_light)
+                rows.append(env.view_cone_function(self.robot, beam=False)(theta))
             g = ca.vertcat(*rows)
             nlp = ca.nlpsol("light_placement", "ipopt", {"x": theta, "p": self._p, "f": self._cost, "g": g}, self._options)
             self._solvers[key] = (nlp, g.size1() - (ZENITH_ROW + 1))
@@ -454,8 +456,8 @@ class ClearPosture:
     one knot): only those below :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at θ₀, more
     when the solution breaks one left out, all in the last solve. IPOPT's time per iteration grows
     with the rows: among the scaling benchmark's 3 obstacles ~26 of its 206 clearance rows are near
-    a posture, and the 186 clear-posture solves of its 144 captures took 3.6 s instead of 6.0 s (the
-    576 captures': 12.9 s instead of 21.8 s). One NLP per row set, built on first use and kept
+    a posture, so a solve with those alone costs well under two thirds of one with all of them.
+    One NLP per row set, built on first use and kept
     (:data:`SOLVERS_KEPT`), with the exact Hessian and the Jacobian of
     :func:`~optlight.planning.nlp.knot_derivatives`: MX graphs over the environment's functions,
     ~9 ms to build on collision where CasADi generating the Jacobian took ~23 ms and its own expanded
@@ -478,8 +480,8 @@ class ClearPosture:
             [ca.vertcat(light_rows(a, rot, sphere.center, sphere.radius), pin_rows(a, target, t1, t2))],
         )
         # Most solves of a light the arm cannot hold clear are infeasible (rti_dome: 320 of 338):
-        # IPOPT told to expect that gives up after a median 30 iterations instead of 93 (rti_dome's
-        # placement 22 s -> 8 s), and the solves that succeed succeed as before (the same 18 there).
+        # IPOPT told to expect that gives up about three times sooner, and the solves that succeed
+        # succeed all the same.
         self._options = ipopt_options(
             setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
         )
@@ -511,7 +513,7 @@ class ClearPosture:
 
     def _all_rows(self, theta: ca.MX, p: ca.MX, options: dict[str, Any]) -> tuple[ca.Function, int]:
         """The NLP with every row, expanded to SX with CasADi's Hessian (one build, many solves:
-        10–40 % less per solve than as MX, rti_dome's reachability map 5.4 s -> 3.7 s); its
+        10–40 % less per solve than as MX); its
         number of environment rows."""
         n = self.robot.n
         theta0, target, t1, t2 = p[:n], p[n : n + 3], p[n + 3 : n + 6], p[n + 6 : n + 9]
@@ -563,14 +565,12 @@ class ClearPosture:
         the pose as well. Where that is only the camera's view (``warm`` breaks no clearance row) and
         ``warm`` is within :data:`NEAR_STEP` of ``theta0`` (a chain's next landmark), IPOPT starts from
         the small barrier :data:`~optlight.planning.trajectory.WARM_MU_INIT` instead of its default
-        0.1, which first pushes the iterate away from the rows it nearly meets: the default face's 50
-        solves took 659 iterations instead of 997, the 576-capture scaling cell's placement 7.2 →
-        5.1 s with every built-in problem's plan the same, and the 576-capture cells among obstacles
-        19–21 s instead of 23–25 s. Not farther (yale_grid's 1.4-rad step then went to another
-        posture, and its plan's motion grew 4 %), nor where ``warm`` breaks a clearance row (with every
-        solve among the scaling benchmark's obstacles from the small barrier, the 36-capture cell lost
-        a capture and the 144-capture one's mean cost grew 20 %): there it settles in the warm start's
-        local optimum, not the anchor's."""
+        0.1, which first pushes the iterate away from the rows it nearly meets: about a third fewer
+        iterations, with every built-in problem's plan the same. Not farther (yale_grid's 1.4-rad
+        step then goes to another posture, and its plan's motion grows 4 %), nor where ``warm``
+        breaks a clearance row (with every solve among the scaling benchmark's obstacles from the
+        small barrier, the 36-capture cell loses a capture and the 144-capture one's mean cost grows
+        20 %): there it settles in the warm start's local optimum, not the anchor's."""
         target = np.asarray(target, float)
         t1, t2 = tangent_basis((target - self.sphere.center) / self.sphere.radius)
         theta0 = np.asarray(theta0, float)

@@ -91,11 +91,10 @@ class Reacher:
         # The posture nearest the start: a chain of landmarks keeps its posture where a clear one is
         # near it. When the IK went to the light from the start without random restarts, one solve
         # from the IK's angles: they hold the light already, so IPOPT has only the clearance to
-        # restore. From the start instead (default face, 57 solves) it took 1,522 iterations instead
-        # of 1,221, and on rti_dome and yale_grid it ended on postures whose plans moved the joints
-        # 34.1 and 27.6 rad instead of 30.1 and 26.2 (same landmarks). A second solve, nearest the
-        # IK's angles, would have the same rows and the same starting point: on eight problems it
-        # never succeeded where that one had failed (0 of 299, 0.9 s of rti_dome's placement). A
+        # restore. From the start instead it needs a quarter more iterations, and on rti_dome and
+        # yale_grid it ends on postures whose plans move the joints 4–13 % more (same landmarks). A
+        # second solve, nearest the IK's angles, would have the same rows and the same starting
+        # point: on eight problems it never succeeds where that one has failed (0 of 299). A
         # restart's angles may be on another branch of the arm (3.1 rad from θ_ref at the default
         # cell's light at zenith 22°, azimuth 320°), where IPOPT found no clear posture and from the
         # start it did: then from the start, and failing that from the IK's angles.

@@ -1,4 +1,4 @@
-"""A light set as the pipeline's landmarks (issue 12): design, map, order and report.
+"""A light set as the pipeline's landmarks: design, map, order and report.
 
 When ``[lightset] kind`` is not "none", the landmark stage designs the set instead of the
 per-azimuth search (:mod:`optlight.planning.lightsets`):
@@ -98,6 +98,7 @@ def landmarks_of_set(
     cost: SetCost | None = None
     requested_cost: float | None = None
     grid: GridMapping | None = None
+    notes: list[str] = []
     if spec.design_over == "reachable":
         step = spec.reach_step_deg
         reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
@@ -128,9 +129,23 @@ def landmarks_of_set(
             def allowed(d: ca.MX) -> ca.MX:
                 return CLEAR_MARGIN - clear.casadi(d)
 
-        result = design_light_set(cost, spec.count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed)
-        directions = requested = result.directions
-        requested_cost, status = result.cost, "set"
+        count, pool = spec.count, None
+        if reach is not None and field is not None:
+            pool = clear_lights(reach, field, cap)
+            count = fitting_count(setup, pool, reach)
+        result = design_light_set(cost, count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed)
+        if pool is not None and field is not None and not _on_clear_cells(result.directions, field):
+            # IPOPT from uniform starts found no set inside a thin clear region: start on it
+            result = design_light_set(
+                cost, count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed, start_pool=pool
+            )
+        directions, requested_cost = result.directions, result.cost
+        if pool is not None and field is not None:
+            directions, moved = _onto_clear_cells(directions, field, pool)
+            if moved:
+                notes += moved
+                requested_cost = cost.numpy(directions, cost.parameters(directions))
+        requested, status = directions, "set"
     # indexed in azimuth order: the placement chains each light's posture from the previous one's,
     # which keeps neighbours on one IK branch as in the per-azimuth search
     by_azimuth = np.argsort(angles_of(directions)[1], kind="stable")
@@ -148,9 +163,67 @@ def landmarks_of_set(
         resolution=(setup.search_scene.camera.width, setup.search_scene.camera.height),
         time_s=elapsed,
         view_zenith=setup.view_zenith,
-        notes=tuple(_grid_notes(grid)),
+        notes=(*_grid_notes(grid), *notes),
     )
     return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed, reach, field)
+
+
+def clear_lights(reach: ReachabilityMap, field: ClearField, cap: Cap) -> Array:
+    """The cells (K, 3, sphere frame) of the map the robot reaches clear, inside the design's ``cap``
+    and well inside the clear region (field ≥ :data:`CLEAR_MARGIN`): the lights a set designed over
+    the reachable lights may take."""
+    cells = reach.directions[reach.clear.ravel()]
+    cells = cells[cap.contains(cells, tol=0.0)]
+    return cells[field.numpy(cells) >= CLEAR_MARGIN]
+
+
+def fitting_count(setup: Setup, pool: Array, reach: ReachabilityMap) -> int:
+    """How many lights the set gets: ``[lightset] count``, or the number of the map's clear lights
+    ``pool`` when that is fewer (``[landmarks] allow_partial``; an :class:`UnreachableError` that
+    says how many fit otherwise)."""
+    spec = setup.problem.lightset
+    if len(pool) >= spec.count:
+        return spec.count
+    where = (
+        f"{setup.robot.name} reaches {len(pool)} distinct lights of the allowed cap clear of the environment, "
+        f"the camera's view and the beam (reachability map at {spec.reach_step_deg:g}°, "
+        f"{int(reach.clear.sum())} clear cells) for a set of {spec.count}"
+    )
+    if not setup.landmark_spec.allow_partial or len(pool) < 1:
+        raise UnreachableError(
+            f"{where}: set [lightset] count = {len(pool)} (or less), or move the robot base ([robot] base_position_m)"
+        )
+    return len(pool)
+
+
+def _on_clear_cells(directions: Array, field: ClearField) -> bool:
+    """Whether every light (N, 3) is where the clear field keeps the set's lights."""
+    return bool((field.numpy(directions) >= CLEAR_MARGIN - 1e-6).all())
+
+
+def _onto_clear_cells(directions: Array, field: ClearField, pool: Array) -> tuple[Array, list[str]]:
+    """The lights (N, 3) with each one off the clear region (field below :data:`CLEAR_MARGIN`, where
+    the set NLP did not converge) moved to the nearest clear light of ``pool`` (K, 3) that no other
+    light of the set takes; and one note naming them."""
+    out = directions.copy()
+    off = np.flatnonzero(field.numpy(directions) < CLEAR_MARGIN - 1e-6)
+    if off.size == 0:
+        return out, []
+    taken = np.zeros(len(pool), bool)
+    kept = np.setdiff1d(np.arange(len(out)), off)
+    if kept.size:  # the pool cells the lights that stay are on or nearest to
+        taken[np.argmax(out[kept] @ pool.T, axis=1)] = True
+    angles = []
+    for i in off:
+        closeness = np.where(taken, -np.inf, pool @ out[i])
+        j = int(np.argmax(closeness))
+        taken[j] = True
+        angles.append(math.degrees(math.acos(float(np.clip(pool[j] @ out[i], -1.0, 1.0)))))
+        out[i] = pool[j]
+    return out, [
+        f"the set design left {off.size} of {len(out)} lights off the lights the reachability map found clear; "
+        f"each was moved to the nearest clear one (up to {max(angles):.1f}°)"
+    ]
 
 
 def allowed_cap(setup: Setup) -> Cap:

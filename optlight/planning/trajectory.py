@@ -1,9 +1,9 @@
-"""The trajectory NLP (DESIGN §6): joint angles at every path knot, built once, solved many times.
+"""The trajectory NLP (docs/design.md §6): joint angles at every path knot, built once, solved many times.
 
 Variables θ_0 … θ_{K−1} (joint angles, rad). Constraints per knot k, with a_k, R_k the light
 position and rotation from the symbolic forward kinematics:
 
-- h(θ_k) = R_kᵀ (O − a_k) − [0, 0, b] = 0 (on the sphere, aimed at O; DESIGN §3);
+- h(θ_k) = R_kᵀ (O − a_k) − [0, 0, b] = 0 (on the sphere, aimed at O; docs/design.md §3);
 - path = "arc": the light stays on its segment's great circle, n_sᵀ (a_k − O) = 0, and between
   the segment's end points (two linear inequalities in a_k); path = "free": on the sphere only;
 - landmark knots: the light exactly at the landmark (the two tangent components of a_k − a*);
@@ -34,6 +34,7 @@ from typing import Any, TypeVar
 import casadi as ca
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 
 from optlight.errors import IPOPT_ITERATION_LIMIT, SolverError, iteration_limit_error
 from optlight.geometry import LightSphere
@@ -52,7 +53,9 @@ from optlight.planning.nlp import (
     tangent_basis,
 )
 from optlight.planning.path import LightPath
+from optlight.planning.timing import chord_path
 from optlight.robot import light_residual
+from optlight.robot.ik import generalized_ik, ik_settings
 from optlight.setup import Setup
 from optlight.spec import SolverSpec
 
@@ -347,9 +350,9 @@ def knot_cost(setup: Setup, theta: Array) -> float:
 _Result = TypeVar("_Result")
 
 #: Clearance rows below this (m) at a knot (or at one next to it) join the trajectory NLP
-#: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. 0.15 m before the
-#: rows were chosen knot by knot: 0.1 m took half the NLP time on the obstacle problems (collision
-#: 1.1 → 0.55 s, the scaling benchmark's 144 captures among 10 obstacles 32 → 13 s).
+#: (:func:`optimize_knots`) and the transfer NLP (:func:`plan_transfer`) there. Chosen knot by knot,
+#: 0.1 m halves the NLP time on the obstacle problems against 0.15 m; a row left out that the
+#: solution breaks still joins (:data:`ACTIVE_ROUNDS`).
 ACTIVE_DISTANCE = 0.1
 #: Solves of the trajectory NLP with the near rows before the last, which has them all.
 ACTIVE_ROUNDS = 2
@@ -374,10 +377,10 @@ def optimize_knots(
     L-BFGS did not converge in 300 iterations on the collision problem.
 
     One solve, from the per-knot IK: its capture postures are the placement's, clear with a margin.
-    (A continuation through the optimum without the environment was tried first until 29 Nov: that
-    optimum moves the capture postures into the view cone or the obstacles, and the constrained solve
-    from it failed on five of the ten built-in problems — default, collision, face_ur5, sphere_xarm7,
-    rti_dome — where the one from the per-knot IK succeeded on all ten, in less time.)
+    (Not a continuation through the optimum without the environment: that optimum moves the capture
+    postures into the view cone or the obstacles, and the constrained solve from it fails on half of
+    the built-in problems — default, collision, face_ur5, sphere_xarm7, rti_dome — where the one
+    from the per-knot IK succeeds on all of them, in less time.)
 
     When those solves fail, they run again with IPOPT's initial barrier parameter
     :data:`WARM_MU_INIT` instead of its default 0.1: the warm start is feasible or nearly, with rows a
@@ -391,11 +394,10 @@ def optimize_knots(
     to be found infeasible (photometric_stereo: 245 more iterations, 4 s). The retry also tells
     IPOPT to expect an infeasible problem (restoration sooner, left only on a real reduction): most
     retries that fail are windows the fallbacks of :func:`~optlight.pipeline.optimize_window` then
-    solve, and on the scaling benchmark's 576 captures among 3 obstacles its five failing retries took
-    303 iterations instead of 583 (the NLP stage 24.0 -> 21.8 s), every solve that succeeded taking the
-    same iterations to the same plan. Not the first try: there it changed face_ur5's way (83 -> 50
-    iterations) to knots that held a capture's light at the antipode of its landmark (0.8 m away:
-    the pin rows' other root on the sphere), which verification refused.
+    solve, and so those retries give up in about half the iterations, while every solve that
+    succeeds takes the same iterations to the same plan. Not the first try: there it sends
+    face_ur5's first solve to knots that hold a capture's light at the antipode of its landmark
+    (0.8 m away: the pin rows' other root on the sphere), which verification refuses.
 
     Nor with a ``fallback``: a warm start whose IK jumped branches between two knots (a step beyond
     ``max_step_rad``) or put the arm into an obstacle at one is not near the feasible set either, and
@@ -545,7 +547,8 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     sphere here, moving to or from the captures.
 
     The straight line in joint space, knots at most :data:`TRANSFER_STEP` apart per joint, when it
-    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``) at every knot,
+    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``, not the beam:
+    the light is not aimed at the object here) at every knot,
     by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
     (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the velocity limits) s.t. the rows ≥
     :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed, with the
@@ -563,7 +566,7 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     robot = setup.robot
 
     def rows(theta: Array) -> Array:
-        clearance, view_rows = environment.sphere_clearance(robot, theta)
+        clearance, view_rows = environment.sphere_clearance(robot, theta, beam=False)
         return np.concatenate([clearance, view_rows if view else np.zeros(0)])
 
     if all(rows(theta).min(initial=np.inf) >= TRANSFER_PADDING for theta in line[1:-1]):
@@ -575,7 +578,7 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
         rows = None if active is None else _rows_of(active)
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
-            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, clearance_rows=rows)]
+            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, beam=False, clearance_rows=rows)]
         )
         if active is not None and rows is not None:  # the view rows, after the clearance rows, at every knot
             views = row_function.size1_out(0) - len(rows)
@@ -641,3 +644,141 @@ def _thinned(knots: Array, step: float) -> Array:
     if kept[-1] != len(knots) - 1:
         kept.append(len(knots) - 1)
     return knots[kept]
+
+
+#: Largest distance (m) the timed path's light may stray from the planned path (the polyline of the
+#: knots' lights) between two knots of a segment on the sphere before a knot is added there: half the
+#: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`, 5 mm; the planner does not
+#: import the verifier).
+PATH_DEVIATION_M = 2.5e-3
+#: Points per knot interval at which the spline's light is measured against the planned path.
+DEVIATION_SAMPLES = 8
+#: Rounds of knot insertion (each halves the intervals that still stray).
+MAX_PATH_REFINEMENTS = 6
+
+
+def follow_planned_path(setup: Setup, knots: Array) -> Array:
+    """The knots (K, n) (rad) of one segment on the sphere, with knots added where the path the
+    timing will follow strays from the planned one.
+
+    The timing follows the not-a-knot cubic spline through the knots in joint space
+    (:func:`~optlight.planning.timing.chord_path`); between two knots the light follows that
+    spline's forward kinematics, not the chord between the knots' lights, and where the joints move
+    a long way for a short light step it leaves the planned path; where the spline leaves the joint
+    bounds, chord_path adds the joint-space midpoint of two knots, whose light is off the path too.
+    So, per round: every waypoint whose light is more than :data:`PATH_DEVIATION_M` from the
+    polyline of the knots' lights is put back on it, and the spline is sampled at
+    :data:`DEVIATION_SAMPLES` points per interval; where its light is more than that from the
+    polyline, a waypoint is added at the interval's middle, put on it the same way. "Put on it":
+    the generalized IK (no restarts) from those joint angles to the light at the polyline's point
+    nearest their light, carried radially onto the sphere (within the sag ρ(1 − cos(Δ/2)) of the
+    chord between two knots Δ apart, 0.06 mm at 2°), aimed at O; kept when it converges within the
+    joint bounds. Halving an interval shrinks the spline's bulge about fourfold; at most
+    :data:`MAX_PATH_REFINEMENTS` rounds. What cannot be put back is left as it is (the verification
+    reports it)."""
+    planned = setup.robot.light_positions(knots)
+    if len(planned) < 2:
+        return knots
+    bounds = (setup.limits.lower, setup.limits.upper)
+    w = knots
+    for _ in range(MAX_PATH_REFINEMENTS):
+        chord = chord_path(w, bounds)
+        if chord is None:
+            return w
+        w = chord[1].copy()
+        changed = False
+        for i in np.flatnonzero(_polyline_distance(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
+            on_path = _onto_path(setup, w[i], planned)
+            if on_path is not None:
+                w[i], changed = on_path, True
+        chord = chord_path(w)  # the parameter of the corrected waypoints
+        if chord is None:
+            return w
+        s, w = chord
+        spline = CubicSpline(s, w, bc_type="not-a-knot")
+        tau = (np.arange(DEVIATION_SAMPLES) + 0.5) / DEVIATION_SAMPLES
+        between = s[:-1, None] + tau[None, :] * np.diff(s)[:, None]
+        lights = setup.robot.light_positions(spline(between.ravel()))
+        stray = _polyline_distance(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
+        for i in np.flatnonzero(stray)[::-1]:  # from the end: the indices before stay valid
+            middle = _onto_path(setup, spline(0.5 * (s[i] + s[i + 1])), planned)
+            if middle is not None:
+                w, changed = np.insert(w, i + 1, middle, axis=0), True
+        if not changed:
+            return w
+    return w
+
+
+def _onto_path(setup: Setup, theta: Array, planned: Array) -> Array | None:
+    """Joint angles near ``theta`` (rad) whose light is on the planned path (the polyline through
+    ``planned`` (K, 3), m, carried onto the sphere), aimed at O, within the joint bounds
+    (:func:`follow_planned_path`); None when the IK does not converge there."""
+    sphere = setup.sphere
+    target = _nearest_on_polyline(setup.robot.light_positions(theta)[0], planned)
+    return _light_at(setup, sphere.center + sphere.radius * _unit(target - sphere.center), theta)
+
+
+def _light_at(setup: Setup, target: Array, theta: Array) -> Array | None:
+    """The generalized IK (no restarts, the joint-limit task) from ``theta`` (rad) to the light at
+    ``target`` (m, on the sphere) aimed at O: its joint angles when it converges within the joint
+    bounds, else None."""
+    settings = {**ik_settings(setup.solver), "secondary": ("joint_limits",)}
+    ik = generalized_ik(setup.robot, setup.sphere, target, theta, restarts=False, **settings)
+    inside = np.all((ik.theta >= setup.limits.lower) & (ik.theta <= setup.limits.upper))
+    return ik.theta if ik.success and inside else None
+
+
+def _unit(v: Array) -> Array:
+    return v / np.linalg.norm(v)
+
+
+#: Largest sag (m) of the chord between two knots' lights on the sphere below the great-circle arc
+#: between them (ρ(1 − cos(Δ/2)) for lights Δ apart) before a knot is added on the arc: half the
+#: spline's allowance. The planned path is the polyline of the knots' lights; the
+#: light, on the sphere, follows the arc.
+ARC_SAG_M = 0.5 * PATH_DEVIATION_M
+
+
+def knots_on_arcs(setup: Setup, knots: Array) -> Array:
+    """The knots (K, n) (rad) of one segment on the sphere, with knots added on the great-circle
+    arc between two consecutive knots whose lights are so far apart that the chord between them
+    sags more than :data:`ARC_SAG_M` below the arc (the free path's NLP bounds the joints' steps,
+    not the light's: lights 50° apart sag 37 mm at ρ = 0.4 m, and the light on the sphere is that
+    far from the planned path). A knot goes at the arc's midpoint, by the generalized IK from the
+    joint-space midpoint (:func:`_light_at`), and the halves are split again, at most
+    :data:`MAX_PATH_REFINEMENTS` deep; where the IK fails, the interval is left as it is."""
+    out = [knots[0]]
+    for q0, q1 in zip(knots[:-1], knots[1:], strict=True):
+        out += _arc_knots(setup, q0, q1, MAX_PATH_REFINEMENTS)
+        out.append(q1)
+    return np.array(out)
+
+
+def _arc_knots(setup: Setup, q0: Array, q1: Array, depth: int) -> list[Array]:
+    """Knots strictly between ``q0`` and ``q1`` on their lights' arc (:func:`knots_on_arcs`)."""
+    sphere = setup.sphere
+    u0, u1 = (_unit(a - sphere.center) for a in setup.robot.light_positions(np.array([q0, q1])))
+    half = 0.5 * float(np.arctan2(np.linalg.norm(np.cross(u0, u1)), u0 @ u1))
+    if depth == 0 or sphere.radius * (1.0 - np.cos(half)) <= ARC_SAG_M or np.linalg.norm(u0 + u1) < 1e-9:
+        return []
+    middle = _light_at(setup, sphere.center + sphere.radius * _unit(u0 + u1), 0.5 * (q0 + q1))
+    if middle is None:
+        return []
+    return [*_arc_knots(setup, q0, middle, depth - 1), middle, *_arc_knots(setup, middle, q1, depth - 1)]
+
+
+def _polyline_distance(points: Array, polyline: Array) -> Array:
+    """Distance (m) from each point (P, 3) to the polyline through the vertices (K ≥ 2, 3):
+    min over segments of |p − (v_i + c d_i)|, c = clip((p − v_i)·d_i / |d_i|², 0, 1)."""
+    a, d = polyline[:-1], np.diff(polyline, axis=0)
+    rel = points[:, None, :] - a[None, :, :]
+    c = np.clip(np.einsum("pkj,kj->pk", rel, d) / np.maximum(np.einsum("kj,kj->k", d, d), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(rel - c[:, :, None] * d[None, :, :], axis=2).min(axis=1)
+
+
+def _nearest_on_polyline(point: Array, polyline: Array) -> Array:
+    """The point (3,) of the polyline through the vertices (K, 3) nearest ``point`` (3,) (m)."""
+    a, d = polyline[:-1], np.diff(polyline, axis=0)
+    c = np.clip(np.einsum("ij,ij->i", point - a, d) / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300), 0.0, 1.0)
+    nearest = a + c[:, None] * d
+    return nearest[np.argmin(np.linalg.norm(nearest - point, axis=1))]

@@ -4,11 +4,13 @@
   URDF, hand joints locked, base placement applied, ``flange`` and ``light`` frames added, joint angles
   θ (one per joint) as the coordinates the rest of optlight uses.
 - :mod:`.kinematics`: the CasADi mirror of pinocchio's forward kinematics
-  (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (DESIGN §3) and the
+  (:attr:`Robot.symbolic_light_pose`), the light residual :func:`light_residual` (docs/design.md §3) and the
   light's sphere coordinates :func:`light_angles`.
+- :class:`Dynamics` (:mod:`.dynamics`): joint torques of a motion by RNEA, the lamp included.
 - :func:`generalized_ik` (:mod:`.ik`, tasks in :mod:`.tasks`): δθ = J# e + (I − J⁺J) γ.
 """
 
+from optlight.robot.dynamics import Dynamics, Lamp
 from optlight.robot.ik import DEFAULT_GAINS, IKResult, generalized_ik, ik_settings, null_space_step
 from optlight.robot.kinematics import light_angles, light_residual, symbolic_frame_pose
 from optlight.robot.loading import SUPPORTED_ROBOTS, Robot, load_robot
@@ -25,9 +27,11 @@ from optlight.robot.tasks import (
 __all__ = [
     "DEFAULT_GAINS",
     "SUPPORTED_ROBOTS",
+    "Dynamics",
     "IKResult",
     "JointLimitTask",
     "KinematicState",
+    "Lamp",
     "LightPointingTask",
     "LightPoseTask",
     "ManipulabilityTask",

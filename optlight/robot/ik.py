@@ -1,4 +1,4 @@
-"""Generalized inverse kinematics (paper; DESIGN §6) for the light.
+"""Generalized inverse kinematics (paper; docs/design.md §6) for the light.
 
 One iteration, with e and J from the primary task (:mod:`optlight.robot.tasks`) at θ:
 

@@ -1,6 +1,6 @@
 """Forward kinematics mirrored from pinocchio into CasADi, and the light residual h(θ).
 
-Pinocchio's Python wheels have no ``pinocchio.casadi`` (DESIGN §7), so the kinematic tree is
+Pinocchio's Python wheels have no ``pinocchio.casadi`` (docs/design.md §7), so the kinematic tree is
 rebuilt here as a CasADi SX graph from the (reduced, base-placed) ``pin.Model``:
 
     oMi[j] = oMi[parent(j)] · jointPlacements[j] · motion_j(θ_j),      oMf = oMi[parentJoint] · placement
@@ -9,7 +9,7 @@ with motion_j a rotation R(u, θ) = I + sinθ [u]× + (1 − cosθ) [u]×² abou
 joints (X, Y, Z, unaligned) and continuous joints (which take the angle θ directly, not cos/sin), and a
 translation θ u for prismatic joints. Lengths in metres, angles in radians, world frame W.
 
-The light residual (DESIGN §3): h(θ) = R_L(θ)ᵀ (O − a_L(θ)) − [0, 0, b]ᵀ, zero iff the light is on the
+The light residual (docs/design.md §3): h(θ) = R_L(θ)ᵀ (O − a_L(θ)) − [0, 0, b]ᵀ, zero iff the light is on the
 sphere (centre O, radius b) and its +z axis passes through O.
 """
 
@@ -40,7 +40,7 @@ CONTINUOUS_JOINTS = frozenset(
 )
 
 
-def _axis(model: pin.Model, joint: pin.JointModel) -> tuple[str, Array]:
+def joint_axis(model: pin.Model, joint: pin.JointModel) -> tuple[str, Array]:
     """("revolute" | "prismatic", unit axis in the joint frame) of a supported joint, read from its
     motion subspace S = (linear, angular) (constant for these joints)."""
     if joint.shortname() in PRISMATIC_JOINTS:
@@ -81,7 +81,7 @@ def symbolic_frame_pose(model: pin.Model, frame_id: int, name: str = "frame_pose
     pos: dict[int, ca.SX] = {0: ca.SX.zeros(3, 1)}
     for j in chain:
         joint = model.joints[j]
-        kind, axis = _axis(model, joint)
+        kind, axis = joint_axis(model, joint)
         place = model.jointPlacements[j]
         parent = model.parents[j]
         r_place = rot[parent] @ ca.DM(place.rotation)

@@ -9,7 +9,7 @@ A :class:`Robot` is a pinocchio model of the arm that carries the light, with
   world frame W;
 - two frames added at the end of the model: ``flange`` = the robot's tool frame, rotated where needed
   so that its +z points out of the tool, and ``light`` = ``flange · T(light_offset_m, light_rpy_deg)``.
-  The light emits along +z of ``light`` (DESIGN §2).
+  The light emits along +z of ``light`` (docs/design.md §2).
 
 **Joint coordinates.** The rest of optlight works with joint *angles* θ ∈ Rⁿ, n = ``model.nv``, one
 per joint, in URDF joint order. Pinocchio stores a continuous joint (kinova joints 1, 4, 6) as
@@ -37,6 +37,12 @@ could find), the value is ours, marked so: an acceleration the maker's own motio
 configuration uses where there is one, else conservative, and the jerk :data:`DEFAULT_JERK_RAMP_S`
 ramp: the acceleration limit reached in 0.05 s, J = a_max / 0.05 s. ``robot.acceleration_limit`` and
 ``robot.jerk_limit`` override them (one value or one per joint).
+
+**Torque limits** (``RobotInfo.torque_limit``, N·m, checked along the plan with the lamp's mass by
+:mod:`optlight.robot.dynamics`): the maker's published joint torques where there are some (Franka's
+datasheet for panda; Universal Robots' for UR3/5/10), else the effort limits of the maker's URDF
+(xarm7, kinova, z1, and a user URDF), else none: a robot without them has its torques reported,
+not checked (:attr:`Robot.torque_limit` None).
 
 **User URDFs** (``robot.urdf``). Mesh files are found as ROS finds them (:func:`find_package`):
 ``package://NAME/rest`` is ``rest`` inside the package folder NAME, looked up in the URDF's folder
@@ -96,6 +102,10 @@ DEFAULT_ACCELERATION_LIMIT = 2.0
 #: Where no jerk limit is published: the time (s) to reach the acceleration limit, J = a_max / ramp.
 DEFAULT_JERK_RAMP_S = 0.05
 
+#: The light's constraints at a capture (docs/design.md §3): h1–h3 (on the sphere, its axis through
+#: O) and the capture's zenith and azimuth. An arm with fewer joints meets them only by chance.
+LIGHT_CONSTRAINTS = 5
+
 #: How many folder levels below a ``ROS_PACKAGE_PATH`` entry :func:`find_package` looks for a package.
 PACKAGE_SEARCH_DEPTH = 3
 
@@ -108,7 +118,9 @@ class RobotInfo:
 
     ``urdf``/``srdf`` are relative to example-robot-data's ``robots`` folder; ``tool_rpy_deg`` rotates
     the URDF tool frame into the flange frame (+z out of the tool); ``reference`` names an SRDF
-    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0.
+    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0;
+    ``torque_limit`` (N·m) the maker's published joint torques and ``torque_source`` where they are
+    published (None: the URDF's effort limits, if it has them).
     """
 
     urdf: str
@@ -121,6 +133,8 @@ class RobotInfo:
     velocity_limit: tuple[float, ...] | float | None = None
     acceleration_limit: tuple[float, ...] | float = DEFAULT_ACCELERATION_LIMIT
     jerk_limit: tuple[float, ...] | float | None = None
+    torque_limit: tuple[float, ...] | None = None
+    torque_source: str = ""
 
     def jerk(self) -> tuple[float, ...] | float:
         """The published jerk limit, else the acceleration limit over :data:`DEFAULT_JERK_RAMP_S`."""
@@ -138,6 +152,13 @@ _UR10_SPEED = (120 * _DEG,) * 2 + (180 * _DEG,) * 4
 #: accelerations (only on torques)"); UR's own MoveIt configuration uses 5 rad/s² for every joint
 #: (UniversalRobots/Universal_Robots_ROS2_Driver, ur_moveit_config/config/joint_limits.yaml).
 _UR_ACCELERATION = 5.0
+#: Universal Robots, "Max. joint torques" (universal-robots.com/articles/ur-articles/max-joint-torques,
+#: the CB3 and e-Series sizes): base, shoulder, elbow, wrist 1–3 (N·m). example-robot-data's UR3 URDF
+#: carries the UR10's efforts (330, 330, 150, 54, 54, 54) and its UR10 URDF 54 on the wrists.
+_UR_TORQUE_SOURCE = "Universal Robots, Max. joint torques (universal-robots.com)"
+_UR3_TORQUE = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
+_UR5_TORQUE = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
+_UR10_TORQUE = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
 
 
 ROBOTS: dict[str, RobotInfo] = {
@@ -152,12 +173,17 @@ ROBOTS: dict[str, RobotInfo] = {
         velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
         acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
         jerk_limit=7500.0,
+        # the same page: τ_max 87 N·m (joints 1–4), 12 N·m (joints 5–7)
+        torque_limit=(87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
+        torque_source="Franka Emika, Robot and interface specifications",
     ),
     "ur3": RobotInfo(
         "ur_description/urdf/ur3_robot.urdf",
         None,
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR3_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR3_SPEED,  # UR3 CB3 datasheet: base, shoulder, elbow 180°/s, wrists 360°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -166,6 +192,8 @@ ROBOTS: dict[str, RobotInfo] = {
         "ur_description/srdf/ur5.srdf",
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR5_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR5_SPEED,  # UR5 CB3 datasheet: every joint 180°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -174,6 +202,8 @@ ROBOTS: dict[str, RobotInfo] = {
         None,
         "tool0",
         theta_ref=_UR_REFERENCE,
+        torque_limit=_UR10_TORQUE,
+        torque_source=_UR_TORQUE_SOURCE,
         velocity_limit=_UR10_SPEED,  # UR10 CB3 datasheet: base, shoulder 120°/s, the others 180°/s
         acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
     ),
@@ -281,7 +311,8 @@ class Robot:
     ``flange_frame_id``/``light_frame_id`` (frames ``flange``, ``light``); ``joint_names`` (URDF names,
     θ order); ``n``; ``lower``/``upper`` (rad or m), ``velocity_limit`` (rad/s or m/s),
     ``acceleration_limit`` (rad/s² or m/s²), ``jerk_limit`` (rad/s³ or m/s³), ``theta_ref``: arrays of
-    length n. ``base_placement`` is
+    length n; ``torque_limit`` (N·m or N, length n, or None where none are published) and
+    ``torque_limit_source`` (where they come from, or why there are none). ``base_placement`` is
     T_WB. ``urdf_path``/``package_dirs``/``locked_joints`` rebuild geometry (:meth:`geometry_model`).
     """
 
@@ -298,6 +329,8 @@ class Robot:
         urdf_path: Path,
         package_dirs: Sequence[Path],
         locked_joints: dict[str, float],
+        torque_limit: ArrayLike | None = None,
+        torque_limit_source: str = "no published torque limits",
     ) -> None:
         self.name = name
         self.model = model
@@ -334,6 +367,11 @@ class Robot:
         else:
             ref = _wrap_into_limits(np.asarray(theta_ref, float), self.lower, self.upper)
         self.theta_ref = ref
+        self.torque_limit: Array | None = None
+        if torque_limit is not None:
+            self.torque_limit = np.broadcast_to(np.asarray(torque_limit, float), (self.n,)).copy()
+            self.torque_limit.setflags(write=False)
+        self.torque_limit_source = torque_limit_source
         #: The SRDF's named configurations (group states), as joint angles θ; filled by load_robot.
         self.named_configurations: dict[str, Array] = {}
         limits = (self.velocity_limit, self.acceleration_limit, self.jerk_limit)
@@ -401,8 +439,8 @@ class Robot:
         Collision meshes are read from the URDF's packages (distances are taken on them). Visual
         meshes are only drawn, by the preview, which reads each file itself
         (:mod:`optlight.viz.meshes`): by default they are not read (:func:`_unread_visual_meshes`;
-        the Panda's COLLADA files took 0.18 s to read into coal, for nothing). ``read_meshes=True``
-        reads them too, into axis-aligned bounding-box trees (0.2 s instead of 0.5 s with the
+        reading the Panda's COLLADA files into coal costs 0.18 s, for nothing). ``read_meshes=True``
+        reads them too, into axis-aligned bounding-box trees (less than half the time of the
         default OBBRSS trees), as the check of a user URDF does."""
         gtype = pin.GeometryType.COLLISION if kind == "collision" else pin.GeometryType.VISUAL
         dirs = [str(p) for p in self.package_dirs]
@@ -462,6 +500,21 @@ def _unread_visual_meshes(model: pin.Model, urdf: Path) -> pin.GeometryModel:
             path, scale = meshes[obj.name]
             obj.geometry, obj.meshPath, obj.meshScale = coal.BVHModelOBBRSS(), str(path), scale
     return geom
+
+
+def _torque_limit(info: RobotInfo, model: pin.Model, urdf: Path) -> tuple[Array | None, str]:
+    """The joint torque limits (N·m) of the (reduced) model and where they come from: the maker's
+    published ones (``info.torque_limit``), else the URDF's effort limits when every joint has one
+    (> 0), else None."""
+    if info.torque_limit is not None:
+        limit = np.asarray(info.torque_limit, float)
+        if limit.shape != (model.nv,):
+            raise RobotError(f"{urdf.name}: {limit.size} torque limits for {model.nv} joints")
+        return limit, info.torque_source
+    effort = np.array([model.effortLimit[j.idx_v] for j in model.joints[1:]], float)
+    if effort.size == model.nv and np.all(np.isfinite(effort)) and np.all(effort > 0):
+        return effort, f"the effort limits of {urdf.name}"
+    return None, f"no published torque limits ({urdf.name} has no effort limits)"
 
 
 def _wrap_into_limits(theta: Array, lower: Array, upper: Array) -> Array:
@@ -612,8 +665,10 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
     A relative ``urdf`` path is resolved against the problem file (``Problem``) or the working
     directory (``RobotSpec``). Raises :class:`RobotError` for an unknown robot, a missing file or an
     unsupported joint type, listing what is available; from a ``Problem``, a user URDF that does not
-    parse or whose meshes do not resolve, and an unknown frame, are :class:`ProblemError` naming
-    ``robot.urdf`` and ``robot.frame`` (from a spec or name, RobotError naming the key).
+    parse, whose meshes do not resolve or that has fewer joints than the light's
+    :data:`LIGHT_CONSTRAINTS` (the problem's robot is to be planned; a spec's may have fewer, for its
+    kinematics alone), and an unknown frame, are :class:`ProblemError` naming ``robot.urdf`` and
+    ``robot.frame`` (from a spec or name, RobotError naming the key).
     """
     file: str | None = None
     if isinstance(source, Problem):
@@ -687,7 +742,6 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             f"{spec.name}: unsupported joint types {', '.join(bad)}; optlight handles revolute, "
             "continuous and prismatic joints"
         )
-
     # Base placement: pre-multiply everything attached to the universe by T_WB.
     base = placement(spec.base_position_m, spec.base_rpy_deg)
     for jid in range(1, model.njoints):
@@ -704,6 +758,14 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if file is not None:
             raise ProblemError(file, "robot.frame", expected, frame_name)
         raise RobotError(f"robot.frame: expected {expected}, got {frame_name!r}")
+    if file is not None and model.nv < LIGHT_CONSTRAINTS:  # a problem's robot is to be planned
+        joints = ", ".join(model.names[j.id] for j in model.joints[1:])
+        raise ProblemError(
+            file,
+            "robot.urdf",
+            f"an arm with at least {LIGHT_CONSTRAINTS} joints for the light's {LIGHT_CONSTRAINTS} constraints "
+            f"(h1–h3, zenith, azimuth); {urdf_path.name} has {model.nv} ({joints})",
+        )
     tool = model.frames[_find_frame(model, frame_name, spec.name)]
     for taken in ("flange", "light"):
         if model.existFrame(taken):
@@ -754,6 +816,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if arr.ndim and arr.shape not in ((1,), (model.nv,)):
             raise RobotError(f"robot.{name}: {arr.size} values for the {model.nv} joints of {spec.name}")
         limits[name] = arr.ravel() if arr.shape != (1,) else arr[0]
+    torque, torque_source = _torque_limit(info, model, urdf_path)
     robot = Robot(
         spec.name,
         model,
@@ -765,6 +828,8 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         urdf_path=urdf_path,
         package_dirs=package_dirs,
         locked_joints=locked,
+        torque_limit=torque,
+        torque_limit_source=torque_source,
     )
     robot.named_configurations = {
         name: _wrap_into_limits(reduced_angles(q), robot.lower, robot.upper) for name, q in states.items()

@@ -1,4 +1,4 @@
-"""The scene: camera, object, G-buffer, and the two luminance models built on it (DESIGN §4).
+"""The scene: camera, object, G-buffer, and the two luminance models built on it (docs/design.md §4).
 
 :class:`Scene` is what the objectives and the planners use::
 

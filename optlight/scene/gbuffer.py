@@ -1,4 +1,4 @@
-"""G-buffer and shadow rays: what the camera sees of the object, per pixel (DESIGN §4).
+"""G-buffer and shadow rays: what the camera sees of the object, per pixel (docs/design.md §4).
 
 Rays are cast with Embree (``embreex``, :class:`RayCaster`); trimesh's pure NumPy ray caster is
 ~400× slower and is never used. Embree's queries release the GIL, so a large batch is split over
@@ -205,7 +205,7 @@ class ShadowRays:
     """The cast-shadow rays of a G-buffer's points, their origins o_i = p_i + ε n_i built once: in
     the world frame (float64, the point light's distances) and in the caster's float32 frame (what
     Embree takes), so that a query only gathers the rays of the lit points (building and converting
-    them at every query took 5–6 % of its time on one thread: 0.3 ms of 6.1 ms for one light on the
+    them at every query would take 5–6 % of its time on one thread: 0.3 ms of 6.1 ms for one light on the
     default face's 256² G-buffer, 0.4 ms of 7.0 ms for a sweep's 19 lights at 64²).
 
     ``model`` is the light's ("directional" or "point"), ``center`` (3,) the light sphere's centre

@@ -1,4 +1,4 @@
-"""Differentiable luminance: the model of DESIGN §4 as a CasADi Function (a, v) -> I.
+"""Differentiable luminance: the model of docs/design.md §4 as a CasADi Function (a, v) -> I.
 
 One MX graph per scene, whatever the number P of pixels: the G-buffer enters as constant
 matrices — normals N (P×3), points X (P×3), albedo ρ (P×1) — so every operation is a matrix

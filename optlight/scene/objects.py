@@ -1,6 +1,6 @@
 """The observed objects: procedural face, analytic sphere, mesh files.
 
-Every object is built in its own frame, which is the light-sphere frame S (DESIGN §2): origin at
+Every object is built in its own frame, which is the light-sphere frame S (docs/design.md §2): origin at
 the object centre O, +z towards the camera, +y up, +x to the image's right. A mesh file's
 coordinates are read as S coordinates (times ``scale``), so its front is its +z side and its top
 its +y side; it is not recentred. :func:`build_object` then moves the object into the world frame,

@@ -1,4 +1,4 @@
-"""NumPy renderer: the Lambertian luminance model of DESIGN §4, evaluated exactly.
+"""NumPy renderer: the Lambertian luminance model of docs/design.md §4, evaluated exactly.
 
 For G-buffer pixel i with point p_i (m), unit normal n_i, albedo ρ_i and cast-shadow visibility
 v_i ∈ {0, 1}, and a light at a (m) on the sphere of centre O and radius b:
@@ -51,7 +51,7 @@ def lambertian(
     visibility: ArrayLike = 1.0,
 ) -> Array:
     """g·ρ_i·(E·v_i·max(0, n_i·l_i)·f_i + k_amb) of surface points, before noise and clip: the one
-    place the model of DESIGN §4 is written (the renderer's pixels, the preview's vertices)."""
+    place the model of docs/design.md §4 is written (the renderer's pixels, the preview's vertices)."""
     cos, falloff = cosine_and_falloff(points, normals, light_position, light.model, center, radius)
     v = np.asarray(visibility, float)
     return light.gain * np.asarray(albedo, float) * (light.power * v * np.maximum(cos, 0.0) * falloff + light.ambient)

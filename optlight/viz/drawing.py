@@ -5,9 +5,11 @@ its (picklable) arguments and the PNG's resolution. :meth:`FigureJob.png` draws 
 a :class:`FigureWorker` draws it in a process of its own. Drawing is most of the time it takes to
 write a plan's results (the six figures of the default problem ~1.5 s, the rest ~1 s), and it needs
 only the plan's numbers, so the command line starts a worker before its own heavy imports (the
-worker's imports take the core those and the problem's build leave idle) and hands it the figures as soon as their numbers exist (``solve(..., worker=)``): the
-landmark figures once the captures are placed, the trajectory and path figures once the motion is
-timed, drawn while it is verified and the exports and the preview are written (``Plan.save``).
+worker's imports take the core those and the problem's build leave idle) and hands it the figures
+as soon as their numbers exist (:class:`optlight.report.FigureDrafts`, listening to the solve's
+stages): the landmark figures once the captures are placed, the trajectory and path figures once the
+motion is timed, drawn while it is verified and the exports and the preview are written
+(``Plan.save``).
 
 The worker is spawned, not forked: a fresh interpreter inherits none of this process's threads
 (Embree's, the ray caster's pool) or locks. It ignores Ctrl-C and SIGHUP (which a terminal sends to
@@ -41,9 +43,8 @@ if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
 
 
 #: zlib level of the figures' PNGs (Pillow's default is 6). PNG is lossless: the pixels are the same
-#: at every level. At 3 the default plan's six figures are saved in ~1.0 s instead of ~1.15 s (the
-#: figure worker's drawing is what the command waits for at its end), at about the same size (the
-#: trajectory figure 420 → 525 kB, the path figure 237 → 212 kB, the others within 10 %).
+#: at every level. At 3 the default plan's six figures are saved ~15 % faster than at 6 (the figure
+#: worker's drawing is what the command waits for at its end), at about the same total size.
 PNG_COMPRESS_LEVEL = 3
 
 
@@ -126,8 +127,8 @@ def _exit_with_parent() -> None:
 
 def _exit_now() -> None:
     """End the worker with status 0 without the rest of the interpreter's shutdown: freeing
-    matplotlib's and CasADi's modules took 0.2–0.3 s, which closing the worker waited for at the end
-    of every command. Nothing is lost: each PNG went back through a pipe written synchronously
+    matplotlib's and CasADi's modules takes 0.2–0.3 s, which closing the worker would wait for at the
+    end of every command. Nothing is lost: each PNG went back through a pipe written synchronously
     before the worker took its next job, and its standard streams are flushed here."""
     for stream in (sys.stdout, sys.stderr):
         if stream is not None:

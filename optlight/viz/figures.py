@@ -32,6 +32,8 @@ if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
 
 #: Floor of the logarithmic colour scale of cost maps (costs can be exactly 0 at the reference).
 COST_FLOOR = 1e-12
+#: Decades of the cost map's logarithmic colour scale below the largest cost.
+COST_DECADES = 5.0
 #: Contact sheet: width and height (in) of a cell; side (in) of the image in it, 0.05 in above the
 #: cell's bottom edge, centred across, its label above.
 CONTACT_SHEET_CELL_IN = (1.4, 1.55)
@@ -213,8 +215,8 @@ def contact_sheet_figure(
     landmark's zenith, an arrow and the capture's.
 
     Drawn as images and labels on one axes spanning the figure, laid out in inches
-    (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, took 1.4 s to draw for
-    36 landmarks (axes, ticks, titles and the tight bounding box of each), this about 0.3 s."""
+    (:data:`CONTACT_SHEET_CELL_IN`): an axes per image, each with its title, would take about five
+    times as long to draw for 36 landmarks (axes, ticks, titles and the tight bounding box of each)."""
     from matplotlib.figure import Figure
 
     n = len(landmarks)
@@ -246,6 +248,19 @@ def contact_sheet_figure(
     return fig
 
 
+def log_color_limits(values: np.ndarray, decades: float = COST_DECADES) -> tuple[float, float]:
+    """Limits (vmin, vmax) of a logarithmic colour scale for ``values``: their largest finite value
+    and ``decades`` below it, not below :data:`COST_FLOOR`. Values all at or below the floor (a
+    term of weight 0, an all-black image), empty or non-finite give one decade above the floor, so
+    the map is drawn in its lowest colour rather than refused by the scale (it needs
+    0 < vmin < vmax)."""
+    finite = values[np.isfinite(values)]
+    vmax = float(finite.max(initial=0.0))
+    if vmax <= COST_FLOOR:
+        return COST_FLOOR, 10.0 * COST_FLOOR
+    return max(COST_FLOOR, vmax * 10.0**-decades), vmax
+
+
 def cost_map_figure(landmarks: LandmarkSet, r_max: float, moved: Sequence[Landmark] = ()) -> Figure:
     """The coarse sweep's cost over (zenith, azimuth) as a polar heat map (radius = zenith in deg up
     to ``r_max`` (rad), logarithmic colours over five decades below the largest cost), the landmarks
@@ -255,15 +270,14 @@ def cost_map_figure(landmarks: LandmarkSet, r_max: float, moved: Sequence[Landma
     grid = landmarks.sweep
     fig = Figure(figsize=(5.8, 5.0))
     ax = _polar_axes(fig, r_max)
-    shown = grid.cost[:, grid.zenith <= r_max + 1e-12]
-    vmax = float(shown.max())
-    cost = np.maximum(grid.cost, COST_FLOOR)
+    vmin, vmax = log_color_limits(grid.cost[:, grid.zenith <= r_max + 1e-12])
+    cost = np.ma.masked_invalid(np.maximum(grid.cost, COST_FLOOR))
     mesh = ax.pcolormesh(
         _azimuth_edges(grid.azimuth),
         np.degrees(_zenith_edges(grid.zenith)),
         cost.T,
         shading="flat",
-        norm=LogNorm(vmin=max(COST_FLOOR, vmax * 1e-5), vmax=vmax),
+        norm=LogNorm(vmin=vmin, vmax=vmax),
         cmap="viridis_r",
     )
     ax.plot(landmarks.azimuths, np.degrees(landmarks.zeniths), "o", mfc="none", color="tab:red", ms=6)

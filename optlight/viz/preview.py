@@ -15,9 +15,9 @@ What is drawn (node paths under ``/meshcat``, see the ``*_NODE`` constants):
 
 - ``robot``: pinocchio's ``MeshcatVisualizer`` with the robot's visual meshes, decimated for display
   with their material colours (:mod:`optlight.viz.meshes`); UR robots with their collision meshes
-  (their COLLADA visuals render broken in meshcat, DESIGN §7);
+  (their COLLADA visuals render broken in meshcat, docs/design.md §7);
 - ``object``: the object mesh (decimated to :data:`OBJECT_MESH_FACES` triangles when larger), unlit,
-  coloured by the luminance model of DESIGN §4 evaluated per vertex (no cast shadows) for the light at
+  coloured by the luminance model of docs/design.md §4 evaluated per vertex (no cast shadows) for the light at
   ``light_position``, as a grey level (white = saturation);
 - ``light_sphere``: the sphere of radius b around O, transparent;
 - ``landmarks/NNN``: one small sphere per landmark, coloured by its cost (viridis, low = dark);
@@ -124,7 +124,7 @@ class RobotLike(Protocol):
 
 
 class TrajectoryLike(Protocol):
-    """What the preview reads from a timed trajectory (:class:`optlight.planning.timing.Trajectory`)."""
+    """What the preview reads from a timed trajectory (:class:`optlight.motion.Trajectory`)."""
 
     @property
     def duration(self) -> float: ...
@@ -576,7 +576,7 @@ def vertex_shading(
     mesh: trimesh.Trimesh, albedo: ArrayLike, light_position: ArrayLike, light: LightSpec, sphere: LightSphere
 ) -> Array:
     """Luminance per vertex (V,) in [0, 1] (1 = saturation) for a light at ``light_position`` (m):
-    DESIGN §4's model, I = clip(g·ρ(E·max(0, n·l)·f + k_amb)) / s, with the vertex normals, directional
+    docs/design.md §4's model, I = clip(g·ρ(E·max(0, n·l)·f + k_amb)) / s, with the vertex normals, directional
     or point light as ``light.model`` says, and no cast shadows."""
     value = lambertian(
         mesh.vertices, mesh.vertex_normals, albedo, light_position, light, sphere.center, sphere.radius

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from optlight.geometry import LightSphere
-from optlight.planning.timing import Trajectory
+from optlight.motion import Trajectory
 from optlight.viz.layout import set_margins
 
 if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
@@ -35,11 +35,11 @@ def trajectory_figure(
     ``rate_hz`` plus the boundaries; limits dashed red, dwells (exposures) shaded, captures dotted.
 
     Fixed margins (in inches) rather than a layout engine, and the dwells and captures of each axes
-    as one collection each rather than an artist per dwell: for 7 joints and 36 dwells the figure
-    took 3 s to build and save, most of it constrained layout measuring 21 axes and 1,500 artists;
-    now 0.8 s. Every axes spans exactly the trajectory's time and only the bottom row has time
-    ticks: matplotlib makes a tick object for every tick of every axes, drawn or not, and the rows
-    above held a third of the figure's 331 (0.60 → 0.49 s to draw the default plan's)."""
+    as one collection each rather than an artist per dwell: for 7 joints and 36 dwells a constrained
+    layout measuring 21 axes and 1,500 artists would take most of the figure's time. Every axes spans
+    exactly the trajectory's time and only the bottom row has time ticks: matplotlib makes a tick
+    object for every tick of every axes, drawn or not, and the rows above would hold a third of the
+    figure's ticks."""
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.figure import Figure
     from matplotlib.ticker import NullLocator
