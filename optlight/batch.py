@@ -45,8 +45,10 @@ solves needs; its strengths (actors, GPUs, shared objects) are of no use here. O
 against seconds per plan.
 
 Processes: a local cluster (one single-threaded worker process per core unless ``workers`` says) is
-started for the run and closed, with its client, in ``finally`` blocks; nothing outlives the call but
-the standard library's one ``multiprocessing`` resource tracker, which lives as long as the caller.
+started for the run and closed, with its client, in ``finally`` blocks, also when a signal stops the
+run (:mod:`optlight.interrupts`; a plan a worker was saving then leaves no staging folder); nothing
+outlives the call but the standard library's one ``multiprocessing`` resource tracker, which lives as
+long as the caller.
 Worker processes are spawned, so a script that calls :func:`run_batch` needs the usual ``if __name__
 == "__main__":`` guard.
 """
@@ -61,6 +63,7 @@ import logging
 import math
 import os
 import re
+import shutil
 import tempfile
 import time
 import warnings
@@ -70,9 +73,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from optlight import locks
+from optlight import interrupts, locks
 from optlight.errors import OptlightError, ProblemError, UsageError
-from optlight.export import MANIFEST, check_output_folder, write_folder, writes_into
+from optlight.export import MANIFEST, STAGING_PREFIX, check_output_folder, write_folder, writes_into
 from optlight.jsondata import json_safe
 from optlight.pipeline import solve
 from optlight.spec import Problem, load_problem, problem_from_dict, read_toml, resolve_problem_path
@@ -616,6 +619,7 @@ def dask_client(
                 # the row's record, not Dask's log
                 silence_logs=logging.CRITICAL,
             )
+            interrupts.reached("cluster-started")
             client = Client(cluster)
         else:
             check_scheduler(scheduler, timeout_s)
@@ -634,6 +638,7 @@ def dask_client(
                     f"the Dask scheduler at {scheduler!r} has no worker after {timeout_s:g} s; "
                     "start some with `dask worker ADDRESS`"
                 ) from None
+        interrupts.reached("client-connected")
         yield client
     finally:
         if client is not None:
@@ -663,6 +668,7 @@ def run_tasks(
     from distributed import as_completed
 
     futures = [client.submit(fn, *args, pure=False) for fn, args in tasks]
+    interrupts.reached("tasks-submitted")
     index = {f.key: i for i, f in enumerate(futures)}
     for future in as_completed(futures):
         i = index[future.key]
@@ -705,6 +711,7 @@ def run_batch(
     out = Path(out)
     resume = check_batch_folder(out)
     spec = spec if isinstance(spec, BatchSpec) else load_batch_spec(spec)
+    interrupts.reached("spec-checked")
     with writes_into(out, RESUME):
         out.mkdir(parents=True, exist_ok=True)
         if not resume:
@@ -722,6 +729,7 @@ def run_batch(
         for i in todo
     ]
     with (
+        no_staging_left(out, local=not serial and scheduler is None and client is None),  # left last
         engine(serial=serial or not todo, scheduler=scheduler, workers=workers, client=client) as client,
         progress_bar(progress, len(spec.rows), "batch", done=len(spec.rows) - len(todo)) as advance,
     ):
@@ -730,12 +738,36 @@ def run_batch(
             i = todo[k]
             records[i] = store_row(out, spec.rows[i], outcome)
             advance(spec.rows[i].id if outcome["status"] != "ok" else None)
+            interrupts.reached("row-done")
 
         used = 0 if client is None else len(client.scheduler_info(n_workers=-1)["workers"])
         run_tasks(client, tasks, on_done, lost={"status": "failed", "metrics": {}, "warnings": []})
+        interrupts.reached("rows-done")
+    interrupts.reached("cluster-closed")
     final = tuple(r for r in records if r is not None)
     csv_path, md_path = write_table(out, final, spec.keys)
+    interrupts.reached("table-written")
     return BatchResult(out, final, csv_path, md_path, used, time.perf_counter() - start, spec.keys)
+
+
+@contextmanager
+def no_staging_left(out: Path, *, local: bool) -> Iterator[None]:
+    """On leaving, however (listed before the engine in a ``with``, after its local cluster closed):
+    when ``local``, remove the staging folders (:data:`~optlight.export.STAGING_PREFIX`) its workers
+    left when they were stopped as they saved a plan (a signal stopped the batch): a new plan's
+    beside its folder (in ``out/plans``, or in ``out`` before ``plans`` existed), an earlier plan's
+    in its folder. Remote workers are not stopped with the client: what they write is theirs to
+    finish."""
+    try:
+        yield
+    finally:
+        if local:
+            patterns = (f"{STAGING_PREFIX}*", f"{PLANS}/{STAGING_PREFIX}*", f"{PLANS}/*/{STAGING_PREFIX}*")
+            for staging in [path for pattern in patterns for path in out.glob(pattern)]:
+                if staging.is_dir() and not staging.is_symlink():
+                    shutil.rmtree(staging, ignore_errors=True)
+                else:
+                    staging.unlink(missing_ok=True)
 
 
 def check_batch_folder(out: Path, option: str = "out") -> bool:

@@ -8,7 +8,13 @@ it will touch before any work: its arguments (finite, in range), its output loca
 ``reach`` then use; ``render`` builds only the scene).
 User mistakes (an invalid argument, problem file or output location, an unreachable landmark, a plan
 that fails verification) are printed in one line on stderr with exit status 2, no traceback; progress
-and results go to stdout. Ctrl-C at any moment exits with status 130 and leaves no partial output.
+and results go to stdout.
+
+Ctrl-C (SIGINT), SIGTERM and SIGHUP stop any command the same way, at any moment
+(:mod:`optlight.interrupts`): the staging folder of an output not yet in place is removed, worker
+processes and a local Dask cluster are stopped, one line is printed on stderr (``optlight:
+interrupted``, ``optlight: terminated``, ``optlight: hung up``) and the exit status is 128 + the
+signal's number (130, 143, 129). No partial output is left, and no process of the command outlives it.
 """
 
 from __future__ import annotations
@@ -60,8 +66,9 @@ SOLVE_MODULES = ("optlight.preflight", "optlight.pipeline", "optlight.report", "
 
 
 def _import(modules: Sequence[str]) -> None:
-    """Import ``modules`` with Ctrl-C deferred (see :data:`MODULES`)."""
+    """Import ``modules`` with the stop signals deferred (see :data:`MODULES`)."""
     with interrupts.deferred():
+        interrupts.reached("imports")
         for module in modules:
             importlib.import_module(module)
 
@@ -116,6 +123,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
     # problem file have passed their checks and before the heavy imports (SOLVE_MODULES); it draws
     # while this process solves and writes the exports and the preview.
     with FigureWorker() as worker:
+        interrupts.reached("figure-worker")
         _import(SOLVE_MODULES)
         from optlight.pipeline import STAGES, solve
         from optlight.preflight import preflight
@@ -123,6 +131,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
         with console.status("building the scene, objectives, robot and environment"):
             setup = preflight(problem)  # built once: the solve below takes it as it is
+        interrupts.reached("setup")
         with Progress(
             TextColumn("{task.description:<10}"),
             BarColumn(),
@@ -136,6 +145,7 @@ def _cmd_solve(args: argparse.Namespace) -> int:
 
             def progress(stage: str, done: int, total: int) -> None:
                 interrupts.check()  # a Ctrl-C that IPOPT turned into "User_Requested_Stop"
+                interrupts.reached(stage)
                 bars.start_task(tasks[stage])
                 bars.update(tasks[stage], completed=done, total=total)
 
@@ -510,13 +520,15 @@ def _add_engine_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status (0, 2 for a user mistake, 130
-    after Ctrl-C).
+    """Entry point of the console script; returns the exit status (0, 2 for a user mistake, 128 +
+    the signal's number after one of :data:`optlight.interrupts.SIGNALS`: 130 after Ctrl-C, 143
+    after SIGTERM, 129 after SIGHUP).
 
     As the console script (``argv`` None) it ends the process itself once the command is done:
-    SIGINT blocked, streams flushed, ``os._exit``. A Ctrl-C in Python's own shutdown (atexit
-    callbacks, freeing the libraries) would otherwise print "Exception ignored … KeyboardInterrupt"
-    or kill the process with the signal instead of the exit status of the finished command.
+    the stop signals blocked, streams flushed, ``os._exit``. A signal in Python's own shutdown
+    (atexit callbacks, freeing the libraries) would otherwise print "Exception ignored …
+    KeyboardInterrupt" or kill the process with the signal instead of the exit status of the
+    finished command.
     """
     # Libraries' log records (trimesh's "unable to use sparse matrix, falling back!" with a traceback)
     # are not for the user: without a handler Python would print warnings and worse on stderr.
@@ -526,11 +538,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     with interrupts.latched():
         try:
             code = _run(argv)
+            interrupts.reached("done")
         except KeyboardInterrupt:  # landed after _run's own handlers
             code = _interrupted()
         finally:
             if argv is None and interrupts.in_main_thread():
-                signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+                signal.pthread_sigmask(signal.SIG_BLOCK, set(interrupts.SIGNALS))
     if argv is None:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -539,14 +552,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(argv: Sequence[str] | None) -> int:
-    """Parse the arguments, import what the command needs (Ctrl-C deferred), run it."""
+    """Parse the arguments, import what the command needs (signals deferred), run it."""
     try:
         args = build_parser().parse_args(argv)
         _import(MODULES.get(args.command, ()))
         with locks.holding():  # the outputs the command checks stay locked until it ends
             return int(args.func(args))
     except OptlightError as e:
-        if interrupts.pending():  # it came of a Ctrl-C IPOPT swallowed (a failed NLP): the interrupt wins
+        if interrupts.pending():  # it came of a signal IPOPT swallowed (a failed NLP): the signal wins
             return _interrupted()
         # a failed verification's report lines follow the first; any other error is one line
         text = str(e) if isinstance(e, VerificationError) else " ".join(str(e).split())
@@ -561,8 +574,13 @@ def _run(argv: Sequence[str] | None) -> int:
 
 
 def _interrupted() -> int:
-    print("optlight: interrupted", file=sys.stderr)
-    return 130
+    """Say which signal stopped the command, in one line; its exit status (128 + its number)."""
+    signum = interrupts.received()
+    try:
+        print(f"optlight: {interrupts.SIGNALS[signum]}", file=sys.stderr)
+    except OSError:  # no terminal left to tell (SIGHUP: it was closed)
+        pass
+    return interrupts.exit_status(signum)
 
 
 if __name__ == "__main__":

@@ -22,8 +22,9 @@ written over files optlight did not write. The output policy (:func:`check_outpu
   existing file is replaced only with ``overwrite`` and only when it is one optlight wrote (a PNG
   with optlight's mark, :func:`optlight.viz.images.written_by_optlight`), a folder never.
 
-The final renames run with Ctrl-C deferred (:func:`optlight.interrupts.deferred`), so an output
-appears whole or not at all; until then an interrupt removes the staging folder or temporary file.
+The final renames run with the stop signals (Ctrl-C, SIGTERM, SIGHUP) deferred
+(:func:`optlight.interrupts.deferred`), so an output appears whole or not at all; until then a signal
+removes the staging folder or temporary file.
 
 lights.lp follows the PTM / relight convention: the first line is the number of images, then one line
 ``filename x y z`` per image, (x, y, z) the unit vector from the object towards the light with x to
@@ -410,6 +411,7 @@ def write_results(
         (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
         for writer in writers:
             files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
+        interrupts.reached("figures")
         for name, png in (figures or {}).items():
             (staging / f"{name}.png").write_bytes(png())
         (staging / "plan.json").write_text(plan_text(files))
@@ -535,6 +537,7 @@ def write_folder(
     try:
         with interrupts.deferred():  # created, then removed by the finally below: never left behind
             staging.mkdir()
+        interrupts.reached("staging-created")
         files = [PurePosixPath(Path(p).relative_to(staging).as_posix()) for p in write(staging)]
         names = sorted({str(f) for f in files})
         manifest: dict[str, Any] = {"written_by": f"optlight {_version()}", "files": names}
@@ -542,7 +545,9 @@ def write_folder(
             manifest["resume"] = resumable
         (staging / MANIFEST).write_text(json.dumps(manifest, indent=1) + "\n")
         interrupts.check()  # an interrupt a library swallowed while writing
+        interrupts.reached("staging-written")
         with interrupts.deferred():
+            interrupts.reached("renames")  # held back until the output is in place
             moving = True
             _move_into_place(staging, target, names, option)
     except OSError as e:

@@ -5,8 +5,8 @@ exactly one line on stderr (``optlight: error: …`` naming the file and key, or
 every file and folder that existed byte-identical and leave nothing behind (no staging folder, no
 partial output). Most cases run in-process through :func:`optlight.cli.main` (``capfd`` captures
 file descriptors 1 and 2, so C libraries' output counts too); a representative set runs as real
-subprocesses. Then: property tests that mutate mesh files and ``--out`` targets, and Ctrl-C (SIGINT)
-sent at random moments of a real ``optlight solve``, export included.
+subprocesses. Then: property tests that mutate mesh files and ``--out`` targets, and the interrupt
+latch in-process (signals sent to real commands at named stages: test_signals.py).
 """
 
 from __future__ import annotations
@@ -16,11 +16,9 @@ import importlib
 import json
 import os
 import random
-import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -710,7 +708,7 @@ def test_any_out_target_is_refused_whole_or_written_whole(
 
 
 # --------------------------------------------------------------------------------------------
-# Ctrl-C at random moments of a solve
+# Ctrl-C: the interrupt latch in-process (signals at named stages of real commands: test_signals.py)
 # --------------------------------------------------------------------------------------------
 
 
@@ -780,107 +778,3 @@ def test_an_error_that_a_swallowed_ctrl_c_caused_is_the_interrupt(
     capfd.readouterr()
     assert main(["check", "default"]) == 130
     assert capfd.readouterr().err == "optlight: interrupted\n"
-
-
-class Run:
-    """``optlight solve`` as a subprocess, its stdout lines time-stamped as they arrive."""
-
-    def __init__(self, args: list[str], cwd: Path) -> None:
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "120"}
-        self.start = time.perf_counter()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "optlight.cli", *args],
-            cwd=cwd,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            env=env,
-        )
-        self.lines: list[tuple[float, str]] = []
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            self.lines.append((time.perf_counter() - self.start, line))
-
-    def finish(self, timeout: float = 120) -> tuple[int, str]:
-        """Wait for the end; the exit status and stderr (a line or two: it cannot fill the pipe)."""
-        assert self.proc.stderr is not None
-        self.proc.wait(timeout=timeout)
-        self._reader.join(timeout=10)
-        err = self.proc.stderr.read()
-        self.proc.stdout.close()  # type: ignore[union-attr]
-        self.proc.stderr.close()
-        return self.proc.returncode, err
-
-    def time_of(self, text: str) -> float | None:
-        return next((t for t, line in self.lines if text in line), None)
-
-
-def complete(folder: Path) -> bool:
-    """A whole results folder: its manifest lists files that all exist, plan.json parses."""
-    try:
-        files = json.loads((folder / MANIFEST).read_text())["files"]
-        json.loads((folder / "plan.json").read_text())
-    except (OSError, ValueError, KeyError):
-        return False
-    return all((folder / f).is_file() for f in files)
-
-
-def test_ctrl_c_at_random_moments_exits_130_and_keeps_the_folders(tmp_path: Path) -> None:
-    """SIGINT at 10 random moments of a solve of the small problem, every other one during the
-    export (timed on uninterrupted runs): exit 130 and "optlight: interrupted" (CasADi may add a
-    warning line when the interrupt lands in IPOPT), no traceback, no staging folder, and either the
-    output folder as it was (a new one absent, an earlier output with the user's file byte-identical)
-    or, when the interrupt landed after the final rename, the whole new output."""
-    path = problem(tmp_path, "small")
-    (tmp_path / "mine.txt").write_text("keep me")
-    reference = Run(["solve", path, "--out", "reference"], tmp_path)
-    code, err = reference.finish()
-    assert code == 0 and err == "", err
-    t_solved = reference.time_of("optlight solve small")  # the summary table: the export starts
-    t_written = reference.time_of("results:")
-    assert t_solved is not None and t_written is not None and 0.5 < t_solved < t_written
-
-    rng = random.Random(16)
-    interrupted = during_export = attempts = 0
-    while interrupted < 10:
-        attempts += 1
-        assert attempts <= 20, "the runs kept finishing before their Ctrl-C"
-        export = attempts % 2 == 0
-        moment = (
-            rng.uniform(t_solved, t_solved + 0.8 * (t_written - t_solved))
-            if export
-            else rng.uniform(0.5, t_solved)
-        )
-        earlier = attempts % 4 >= 2  # half the runs update an earlier output (--force) holding a user file
-        out = tmp_path / f"out{attempts}"
-        if earlier:
-            shutil.copytree(tmp_path / "reference", out)
-            (out / "user.md").write_text("the user's")
-        before = snapshot(tmp_path)
-        run = Run(["solve", path, "--out", out.name, *(["--force"] if earlier else [])], tmp_path)
-        time.sleep(max(0.0, moment - (time.perf_counter() - run.start)))
-        if run.proc.poll() is None:
-            run.proc.send_signal(signal.SIGINT)
-        code, err = run.finish()
-        assert not staging_left(tmp_path)
-        after = snapshot(tmp_path)
-        outside = {e: d for e, d in before.items() if not e.startswith(out.name + "/") and e != out.name}
-        assert {e: after.get(e) for e in outside} == outside, "files outside the output changed"
-        if earlier:
-            assert (out / "user.md").read_text() == "the user's"
-        if code == 0:  # finished before the Ctrl-C reached it: time the next moments on this run
-            assert complete(out) and err == ""
-            t_solved = min(t_solved, run.time_of("optlight solve small") or t_solved)
-            t_written = min(t_written, run.time_of("results:") or t_written)
-            continue
-        interrupted += 1
-        ours = [line for line in err.splitlines() if "CasADi" not in line]
-        assert code == 130 and ours == ["optlight: interrupted"], (moment, code, err)
-        if after != before:
-            assert complete(out), f"interrupted at {moment:.2f} s: a partial output"
-        during_export += run.time_of("optlight solve small") is not None and run.time_of("results:") is None
-    assert during_export >= 1, "no Ctrl-C landed during the export"

@@ -12,8 +12,11 @@ motion is timed, drawn while it is verified and the exports and the preview are 
 (``Plan.save``).
 
 The worker is spawned, not forked: a fresh interpreter inherits none of this process's threads
-(Embree's, the ray caster's pool) or locks. It ignores Ctrl-C from its first instant, which this
-process handles and answers by closing the worker.
+(Embree's, the ray caster's pool) or locks. It ignores Ctrl-C and SIGHUP (which a terminal sends to
+every process of the command) from its first instant: this process handles them
+(:mod:`optlight.interrupts`) and answers by closing the worker, at once when the worker's ``with``
+block ends with an exception. And it never outlives this process, whatever ended it (SIGKILL
+included): it ends as soon as the pipe multiprocessing keeps from this process reaches its end.
 """
 
 from __future__ import annotations
@@ -25,12 +28,15 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any
+
+from optlight import interrupts
 
 if TYPE_CHECKING:  # imported where a figure is made: see optlight.viz.layout
     from matplotlib.figure import Figure
@@ -79,11 +85,16 @@ def _draw(job: FigureJob) -> bytes:
     return job.png()
 
 
-def _block_sigint() -> set[int | signal.Signals] | None:
-    """Block SIGINT in this thread; the previous mask (None where the OS has no signal masks)."""
+#: The signals a worker ignores: those a terminal sends to every process of the command (Ctrl-C's
+#: SIGINT, the hang-up's SIGHUP), which the parent handles by closing the worker.
+IGNORED = tuple(s for s in interrupts.SIGNALS if s != signal.SIGTERM)
+
+
+def _block_ignored() -> set[int | signal.Signals] | None:
+    """Block :data:`IGNORED` in this thread; the previous mask (None where the OS has no signal masks)."""
     if not hasattr(signal, "pthread_sigmask"):
         return None
-    return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    return signal.pthread_sigmask(signal.SIG_BLOCK, set(IGNORED))
 
 
 def _restore_signals(mask: set[int | signal.Signals] | None) -> None:
@@ -92,10 +103,26 @@ def _restore_signals(mask: set[int | signal.Signals] | None) -> None:
 
 
 def _start_worker() -> None:
-    """In the worker: leave Ctrl-C to the parent, which closes the worker; and end the process
-    without tearing the interpreter down (:func:`_exit_now`)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """In the worker: leave :data:`IGNORED` to the parent, which closes the worker; end with the
+    parent (:func:`_exit_with_parent`); and end the process without tearing the interpreter down
+    (:func:`_exit_now`)."""
+    for signum in IGNORED:
+        signal.signal(signum, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, name="optlight-parent-watch", daemon=True).start()
     atexit.register(_exit_now)  # registered last, so run first, once the worker's loop has returned
+
+
+def _exit_with_parent() -> None:
+    """In a thread of the worker: wait until the parent process is gone, then end the worker at once.
+
+    Spawned, the worker holds the read end of a pipe whose write end only the parent holds
+    (:func:`multiprocessing.parent_process`'s sentinel); it reaches its end when the parent ends,
+    whatever ended it. The worker's own queue would never tell (it holds both ends of it), and an
+    orphaned worker would keep the caller's stdout and stderr open."""
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        parent.join()
+        os._exit(1)
 
 
 def _exit_now() -> None:
@@ -146,23 +173,37 @@ class FigureWorker:
         self._pool = ProcessPoolExecutor(
             max_workers=1, mp_context=multiprocessing.get_context("spawn"), initializer=_start_worker
         )
-        # The process starts with the first job: now, not at the first figure. SIGINT is blocked
-        # while it starts, so that it is born ignoring Ctrl-C (the mask carries over to the new
-        # interpreter) rather than printing a KeyboardInterrupt from its imports; here a Ctrl-C
-        # meanwhile waits, and is delivered on unblocking.
-        blocked = _block_sigint()
+        # The process starts with the first job: now, not at the first figure. IGNORED are blocked
+        # while it starts, so that it is born ignoring them (the mask carries over to the new
+        # interpreter) rather than printing a KeyboardInterrupt from its imports; here a signal
+        # meanwhile waits, and is delivered on unblocking: then the worker is closed at once, as no
+        # ``with`` block will.
+        blocked = _block_ignored()
         try:
-            self._pool.submit(_warm_up)
-        finally:
-            _restore_signals(blocked)
+            try:
+                self._pool.submit(_warm_up)
+            finally:
+                _restore_signals(blocked)
+        except BaseException:
+            self.close(terminate=True)
+            raise
 
     def draw(self, job: FigureJob) -> Future[bytes]:
         """The PNG bytes of ``job``, drawn in the worker (errors come back through the future)."""
         return self._pool.submit(_draw, job)
 
-    def close(self) -> None:
-        """Stop the process once the figure it is drawing is done; figures still queued are dropped."""
-        self._pool.shutdown(wait=True, cancel_futures=True)
+    def close(self, terminate: bool = False) -> None:
+        """Stop the process once the figure it is drawing is done, or at once with ``terminate``;
+        figures still queued are dropped. Signals are held back meanwhile (:func:`interrupts.held`):
+        one that cut the shutdown in half would leave the process running and its queues' semaphores
+        unreleased (the resource tracker then reports them "leaked")."""
+        with interrupts.held():
+            interrupts.reached("figure-worker-closing")
+            if terminate:
+                # ProcessPoolExecutor has no public way to stop a busy worker (before Python 3.14)
+                for process in list((self._pool._processes or {}).values()):
+                    process.terminate()
+            self._pool.shutdown(wait=True, cancel_futures=True)
 
     def __enter__(self) -> FigureWorker:
         return self
@@ -170,4 +211,4 @@ class FigureWorker:
     def __exit__(
         self, kind: type[BaseException] | None, value: BaseException | None, traceback: TracebackType | None
     ) -> None:
-        self.close()
+        self.close(terminate=kind is not None)  # an error or a signal: the figures are not wanted
