@@ -184,6 +184,7 @@ def test_an_unreachable_scheduler_is_one_line(
     assert set(_children()) <= set(before)
 
 
+@pytest.mark.slow
 def test_the_cluster_run_finishes_every_row_and_records_the_failure(cluster_run: dict) -> None:
     assert cluster_run["code"] == 1  # a row failed
     spec: BatchSpec = load_batch_spec(cluster_run["spec"])
@@ -214,6 +215,7 @@ def test_no_process_is_left_behind(cluster_run: dict) -> None:
     assert all("multiprocessing.resource_tracker" in cmd for cmd in new.values()), new
 
 
+@pytest.mark.slow
 def test_the_cluster_gives_the_serial_results(cluster_run: dict, serial_run: optlight.BatchResult) -> None:
     """The same records, trajectories and landmarks; to 1e-8 rather than bit for bit, since a Dask
     worker runs its BLAS single-threaded (another summation order) where this process may not."""
@@ -242,6 +244,7 @@ def test_the_cluster_gives_the_serial_results(cluster_run: dict, serial_run: opt
         assert [lm["zenith_deg"] for lm in lights[0]] == pytest.approx([lm["zenith_deg"] for lm in lights[1]])
 
 
+@pytest.mark.slow
 def test_a_resumed_batch_solves_only_what_is_not_done(
     serial_run: optlight.BatchResult, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -314,6 +317,7 @@ def _log_in_worker(level: int, text: str) -> None:
     logging.getLogger("distributed.worker").log(level, text)
 
 
+@pytest.mark.slow
 def test_a_local_clusters_error_logs_do_not_reach_the_terminal(capfd: pytest.CaptureFixture[str]) -> None:
     """An ERROR a local cluster's worker logs (as Dask does when a heartbeat meets the scheduler
     already closed, with its traceback, at the end of a batch) is not printed on the terminal the
@@ -323,6 +327,7 @@ def test_a_local_clusters_error_logs_do_not_reach_the_terminal(capfd: pytest.Cap
     assert "a worker's error at shutdown" not in capfd.readouterr().err
 
 
+@pytest.mark.slow
 def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Path) -> None:
     """A scheduler given by address (a local cluster standing in for a remote one): its workers do
     not write into the output folder; the plans' files come back and are written here, the same
@@ -347,6 +352,7 @@ def test_a_remote_scheduler_gets_the_rows_and_sends_the_plans_back(tmp_path: Pat
         ).read_bytes()
 
 
+@pytest.mark.slow
 def test_the_example_batch_plans_every_row(tmp_path: Path) -> None:
     """The README's example batch, as shipped (here one row after the other): every row is planned
     and verified. Its third base placement was once (-0.05, -0.1, 0) m, where the view cone left

@@ -187,6 +187,7 @@ def test_a_base_out_of_reach_reaches_nothing() -> None:
     assert (outcome["reached"], outcome["clear"], outcome["error"]) == (0, 0, None)
 
 
+@pytest.mark.slow
 def test_design_cell_picks_the_reachable_placement_and_writes_a_ready_problem(tmp_path: Path) -> None:
     spec = write_spec(tmp_path, "top = 1\n[search]\nbase_x_m = [-2.0, 0.0]\n")
     result = design_cell(spec, tmp_path / "out", serial=True, progress=False)
@@ -215,6 +216,7 @@ def test_design_cell_picks_the_reachable_placement_and_writes_a_ready_problem(tm
     assert summary["best"]["values"]["base_x_m"] == best.values["base_x_m"]
 
 
+@pytest.mark.slow
 def test_an_invalid_camera_placement_scores_zero_with_its_error(tmp_path: Path) -> None:
     """A camera on the light sphere (0.4 m from the object centre) is refused by the problem's own check;
     the placement is recorded with that error, naming the search axis that put it there (the paper's
@@ -228,6 +230,7 @@ def test_an_invalid_camera_placement_scores_zero_with_its_error(tmp_path: Path) 
     assert result.best is not invalid
 
 
+@pytest.mark.slow
 def test_the_cluster_search_gives_the_serial_one(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """Coarse to fine over base x and y, on 2 workers through the command line and here: the same
     placements, the same scores, the same best; files written by the command."""

@@ -43,12 +43,14 @@ def test_every_example_is_tested() -> None:
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
+@pytest.mark.slow
 def test_quickstart_writes_the_results_folder(quickstart: Path) -> None:
     names = {p.name for p in quickstart.iterdir()}
     assert {"trajectory.csv", "plan.json", "lights.lp", "preview.html", "report.md"} <= names
     assert len(json.loads((quickstart / "plan.json").read_text())["landmarks"]) == 6
 
 
+@pytest.mark.slow
 def test_reference_image_recovers_the_light(tmp_path: Path) -> None:
     stdout = run_example("reference_image", tmp_path, "--landmarks", "1")
     assert (tmp_path / "reference.png").is_file() and (tmp_path / "best.png").is_file()
@@ -87,6 +89,7 @@ def test_read_trajectory_finds_the_landmarks_at_the_captures(quickstart: Path, t
     assert deviation < 1e-6
 
 
+@pytest.mark.slow
 def test_read_trajectory_solves_when_given_no_results(tmp_path: Path) -> None:
     run_example("read_trajectory", tmp_path, "--landmarks", "3")
     assert (tmp_path / "plan" / "plan.json").is_file() and (tmp_path / "trajectory_50hz.csv").is_file()

@@ -164,6 +164,7 @@ def test_unreachable_landmark_is_named() -> None:
         optlight.solve(far)
 
 
+@pytest.mark.slow
 def test_partial_plans_drop_unreachable_landmarks_with_a_warning() -> None:
     far = small_problem(
         **REACH_ONLY,

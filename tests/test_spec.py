@@ -237,6 +237,7 @@ print(status("VmHWM:") - before)
 """
 
 
+@pytest.mark.slow
 def test_memory_estimate_bounds_the_measured_growth() -> None:
     """The estimate's per-pixel rate bounds that of the Setup (camera-resolution scene and
     objective) and the landmark search (its search renders, the reported costs at the camera's

@@ -276,6 +276,7 @@ def test_a_solve_builds_each_object_once(path: str, monkeypatch: pytest.MonkeyPa
     assert None in selections and len(selections) >= 2 and len(set(selections)) == len(selections), selections
 
 
+@pytest.mark.slow
 def test_installed_package_solves_from_another_folder(tmp_path: Path) -> None:
     """``pip install`` of the repository (not editable) into a folder of its own, then the CLI from an
     unrelated working folder: the built-in problems ship inside the package."""

@@ -6,7 +6,7 @@ is set to it unless already set), ``scalar_rgb`` otherwise; the system's LLVM 14
 variant, so it is never tried without LLVM 19.
 
 Units, so that a Lambertian world renders what the model renders (checked pixel by pixel in
-``tests/test_capture.py``). Mitsuba's diffuse BSDF reflects L_o = (ρ/π)·E_irr·cos θ, and a pixel is
+``tests/capture/test_capture.py``). Mitsuba's diffuse BSDF reflects L_o = (ρ/π)·E_irr·cos θ, and a pixel is
 the gain g times the radiance it sees, so
 
 - point light: intensity π·E'·b² (irradiance E'·(b/r)² cos θ at distance r, the model's falloff);

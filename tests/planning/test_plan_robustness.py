@@ -76,6 +76,7 @@ def test_beam_cone_holds_every_ray_the_exact_check_casts(stereo_setup: Setup) ->
     assert (beam.signed_distance(np.vstack([side, behind]), apex) > 0).all()
 
 
+@pytest.mark.slow
 def test_a_stereo_set_on_a_sphere_keeps_the_arm_out_of_the_beam() -> None:
     """A photometric-stereo set on a sphere with a 50° cap on the panda: the arm stood in the light's
     beam at some lights (verification failed on the beam) when the beam was only verified."""

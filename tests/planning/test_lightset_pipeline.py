@@ -43,6 +43,7 @@ def _directions_world(plan: Plan) -> np.ndarray:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+@pytest.mark.slow
 def test_set_solve_passes_verification_and_reports_requested_vs_achieved(ps_plan: Plan) -> None:
     assert ps_plan.verification.passed
     report = ps_plan.lightset
@@ -105,6 +106,7 @@ def test_recovered_normals_match_the_model(ps_plan: Plan, ps_folder: Path) -> No
     assert stats["p95_deg"] == pytest.approx(np.percentile(error, 95), abs=1e-6)
 
 
+@pytest.mark.slow
 def test_grid_replaces_the_lights_in_the_camera_view() -> None:
     """A grid with the frontal light (azimuth 0, elevation 0: the camera's axis, zenith 0) cannot be
     captured with the lamp out of the view: it is replaced on the allowed cap and reported."""
@@ -201,6 +203,7 @@ def test_a_grid_light_is_not_replaced_onto_another_light_of_the_set() -> None:
     assert closest >= setup.landmark_spec.distinct_deg
 
 
+@pytest.mark.slow
 def test_a_set_designed_over_the_reachable_lights_is_placed_where_it_was_designed() -> None:
     """rti_dome, 8 lights. Designed on the cap alone, the placement has to replace 3 of them (the arm
     reaches them only across the camera's view cone). Designed over the reachability map, every light

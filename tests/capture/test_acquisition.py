@@ -60,6 +60,7 @@ def mismatched() -> Acquisition:
         return acquire(tiny(**MISMATCH), "model")
 
 
+@pytest.mark.slow
 def test_the_loop_reduces_a_mismatched_measured_cost(mismatched: Acquisition) -> None:
     first, best = mismatched.open_loop, mismatched.best
     assert len(mismatched.iterations) >= 2
@@ -101,6 +102,7 @@ def test_a_replan_that_fails_verification_ends_the_loop_and_the_best_plan_stands
     assert result.status == "re-plan failed verification (landmark); the robot does not run it"
 
 
+@pytest.mark.slow
 def test_against_a_photographed_reference_the_loop_corrects_a_darker_face(tmp_path: Path) -> None:
     """A lab's reference: the camera's own image at a light the robot reaches (35°, 120°), read as
     ``[objective.reference] kind = "image"``. The face is half as bright as the model thinks: the
@@ -149,6 +151,7 @@ def test_world_equal_to_the_model_leaves_the_plan_alone() -> None:
     )
 
 
+@pytest.mark.slow
 def test_dataset_folder_is_whole_and_reads_back(tmp_path: Path, mismatched: Acquisition) -> None:
     out = tmp_path / "dataset"
     files = mismatched.save(out)
@@ -244,6 +247,7 @@ def tiny_file(folder: Path, iterations: int = 2) -> Path:
     return problem
 
 
+@pytest.mark.slow
 def test_cli_acquire(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     problem = tiny_file(tmp_path)
     out = tmp_path / "out"
@@ -332,6 +336,7 @@ def test_rti_and_grid_rounds_are_measured_by_coverage_and_by_the_grid_error(mism
     assert round_measure(grid, plan, [], None) == 3.5
 
 
+@pytest.mark.slow
 def test_photometric_stereo_rounds_are_measured_by_the_normal_error_of_their_images() -> None:
     """A photometric-stereo set in a world with another response and ambient: the normals recovered
     from the captured images with the calibrated model are as good as the plan's own model capture
@@ -389,6 +394,7 @@ def continue_command(text: str) -> list[str]:
     return command[1:]
 
 
+@pytest.mark.slow
 def test_folder_camera_rounds_run_to_the_end_from_the_printed_text(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -310,6 +310,7 @@ def offered_and_placed(case: Case, offered: Any, captures: Any) -> Any:
         return ahead.placement(captures)
 
 
+@pytest.mark.slow
 def test_the_placement_ahead_places_in_its_thread_what_place_landmarks_places(
     low: Case, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -339,6 +340,7 @@ def test_the_placement_ahead_places_in_its_thread_what_place_landmarks_places(
     assert names == {"MainThread"}
 
 
+@pytest.mark.slow
 def test_azimuth_out_of_reach_is_named_or_dropped(monkeypatch: pytest.MonkeyPatch) -> None:
     """From 20° zenith up, the low base reaches only the 270° azimuth of four; the placement run
     ahead of the search raises the same error, once asked for the placement."""

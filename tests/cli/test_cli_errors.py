@@ -676,6 +676,7 @@ def build_target(base: Path, kind: str, rng: random.Random) -> Path:
 
 @settings(max_examples=20, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 @given(spec=out_targets(), seed=st.integers(0, 2**16))
+@pytest.mark.slow
 def test_any_out_target_is_refused_whole_or_written_whole(
     spec: tuple[str, bool, bool], seed: int, tmp_path_factory: pytest.TempPathFactory, capfd
 ) -> None:

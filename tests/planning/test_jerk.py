@@ -120,6 +120,7 @@ def test_same_geometric_path_as_toppra_and_slower_but_continuous() -> None:
     ascale=st.floats(0.5, 10.0),
     jscale=st.floats(5.0, 500.0),
 )
+@pytest.mark.slow
 def test_limits_hold_and_acceleration_is_continuous_under_dense_resampling(
     n: int, points: list[int], seed: int, vscale: float, ascale: float, jscale: float
 ) -> None:

@@ -287,6 +287,7 @@ def test_a_light_in_the_view_cone_is_caught() -> None:
     assert light and all(v.time_s in trajectory.capture_times for v in light)
 
 
+@pytest.mark.slow
 def test_table_wall_plan_is_clear_where_the_unconstrained_one_is_not() -> None:
     """table_wall: table, camera stand, wall and the view cone at the captures (the
     placement NLP gives the landmarks whose IK solution breaks a row clear joint angles)."""

@@ -43,6 +43,7 @@ def test_a_worker_draws_what_this_process_draws_then_stops() -> None:
     assert [process.exitcode for process in started] == [0]  # ended, not killed, by its shortcut exit
 
 
+@pytest.mark.slow
 def test_a_results_folder_is_the_same_with_a_worker(tmp_path: Path) -> None:
     """Drawn here, or by a worker: the landmark figures while the motion is planned, the motion's
     while it is verified (both as the solve's stages finish: FigureDrafts), and written by save. The

@@ -37,6 +37,7 @@ def distances(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 100_000) -> tuple
     return cKDTree(pb).query(pa)[0], cKDTree(pa).query(pb)[0]
 
 
+@pytest.mark.slow
 def test_decimated_panda_meshes_stay_close_to_the_originals(panda_visual):
     """Each Panda mesh, from 600–22,000 triangles down to at most ~4,000: the same bounding box
     within 2 mm (so the same frame: the files are Z-up COLLADA with node transforms), 99 % of either

@@ -95,6 +95,7 @@ def open_preview(page: Page, path: Path) -> np.ndarray:
     return shot
 
 
+@pytest.mark.slow
 def test_offline_preview_draws_the_robot(tmp_path):
     # the paper's layout: the robot at θ_ref stands clear of the face and the sphere on screen
     problem = problem_from_dict(

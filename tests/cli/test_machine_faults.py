@@ -308,7 +308,7 @@ def batch_spec(tmp: Path) -> str:
 def not_dask(tmp: Path) -> None:
     """`batch --scheduler` and `cell --scheduler` at an HTTP server: one line saying it is not a Dask
     scheduler (Dask read its bytes as a message length and tried to allocate 3.07 EiB)."""
-    cell_spec = str(Path(__file__).parents[1] / "examples" / "cell_panda.toml")
+    cell_spec = str(Path(__file__).parents[2] / "examples" / "cell_panda.toml")
     with tcp_server(b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\n\r\n" * 4) as address:
         for command, spec in (("batch", batch_spec(tmp)), ("cell", cell_spec)):
             run = cli(command, spec, "--scheduler", address, "--out", str(tmp / command), cwd=tmp)
@@ -345,6 +345,7 @@ FAULTS = [
 
 
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.name for f in FAULTS])
+@pytest.mark.slow
 def test_machine_fault(fault: Fault, tmp_path: Path) -> None:
     fault.run(tmp_path)
     assert not list(tmp_path.rglob(f"{STAGING_PREFIX}*"))
