@@ -148,6 +148,23 @@ def _check_light(p: Problem, file: str) -> None:
         )
 
 
+def _check_lightset(p: Problem, file: str) -> None:
+    """Light counts per kind, one grid source, grid angles in range, the grid file present."""
+    ls = p.lightset
+    least = {"photometric_stereo": 3, "rti": 2}.get(ls.kind)
+    if least is not None and ls.count < least:
+        raise ProblemError(
+            file, "lightset.count", f"at least {least} lights (lightset.kind = '{ls.kind}')", ls.count
+        )
+    if ls.grid_file is not None and ls.grid_deg is not None:
+        raise ProblemError(file, "lightset.grid_deg", "either grid_deg or grid_file, not both", "both set")
+    if ls.grid_file is not None and not p.resolve(ls.grid_file).is_file():
+        raise ProblemError(file, "lightset.grid_file", "an existing CSV file", ls.grid_file)
+    for i, (_, elevation) in enumerate(ls.grid_deg or ()):
+        if not -90.0 <= elevation <= 90.0:
+            raise ProblemError(file, f"lightset.grid_deg[{i}][1]", "an elevation in [−90, 90] deg", elevation)
+
+
 def _check_world(p: Problem, file: str) -> None:
     """The real light (its radius, its offset from the modelled one) fits inside the light sphere, a
     spot beam is a point light, the sensor noise does not drown the captures."""
@@ -176,20 +193,3 @@ def _check_world(p: Problem, file: str) -> None:
             f"a noise σ ≤ light.saturation = {light.saturation:g} (more drowns every capture)",
             p.world.noise_std,
         )
-
-
-def _check_lightset(p: Problem, file: str) -> None:
-    """Light counts per kind, one grid source, grid angles in range, the grid file present."""
-    ls = p.lightset
-    least = {"photometric_stereo": 3, "rti": 2}.get(ls.kind)
-    if least is not None and ls.count < least:
-        raise ProblemError(
-            file, "lightset.count", f"at least {least} lights (lightset.kind = '{ls.kind}')", ls.count
-        )
-    if ls.grid_file is not None and ls.grid_deg is not None:
-        raise ProblemError(file, "lightset.grid_deg", "either grid_deg or grid_file, not both", "both set")
-    if ls.grid_file is not None and not p.resolve(ls.grid_file).is_file():
-        raise ProblemError(file, "lightset.grid_file", "an existing CSV file", ls.grid_file)
-    for i, (_, elevation) in enumerate(ls.grid_deg or ()):
-        if not -90.0 <= elevation <= 90.0:
-            raise ProblemError(file, f"lightset.grid_deg[{i}][1]", "an elevation in [−90, 90] deg", elevation)

@@ -46,7 +46,8 @@ def section(cls: type, doc: str) -> Any:
 
 
 def describe(tp: Any) -> str:
-    """How the reference names a key's type: "number", "list of 3 numbers", "\"a\" or \"b\"", …"""
+    """How the reference and the refusals name a key's type: number, list of 3 numbers, the allowed
+    literals, table, …"""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
         return " or ".join(describe(a) if a is not type(None) else "unset" for a in args)

@@ -1,4 +1,4 @@
-"""Sections of where the light stops: the landmark search and lights designed as a set."""
+"""Sections of where the light goes: the landmark search and lights designed as a set."""
 
 from __future__ import annotations
 
