@@ -84,7 +84,8 @@ from optlight.planning.nlp import sphere_position
 from optlight.robot import generalized_ik
 from optlight.scene import Camera
 from optlight.setup import Setup
-from optlight.spec import Problem, image_names
+from optlight.spec import Problem
+from optlight.spec.sizing import image_names
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

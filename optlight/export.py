@@ -80,7 +80,7 @@ from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.jsondata import json_safe
 from optlight.motion import Trajectory
 from optlight.planning.waypoints import Waypoints
-from optlight.spec import image_names
+from optlight.spec.sizing import image_names
 from optlight.verify import VerificationReport
 
 Array = NDArray[np.float64]

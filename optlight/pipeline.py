@@ -79,7 +79,8 @@ from optlight.planning.trajectory import (
 )
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.setup import Setup
-from optlight.spec import Problem, check_trajectory_samples
+from optlight.spec import Problem
+from optlight.spec.sizing import check_trajectory_samples
 from optlight.stages import OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory

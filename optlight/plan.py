@@ -29,7 +29,8 @@ from optlight.report import RESULTS_DPI, save_results
 from optlight.robot import Robot
 from optlight.scene import Scene
 from optlight.setup import Setup
-from optlight.spec import Problem, image_names
+from optlight.spec import Problem
+from optlight.spec.sizing import image_names
 from optlight.verify import VerificationReport
 from optlight.viz.drawing import FigureJob, FigureWorker
 from optlight.viz.preview import Preview

@@ -53,11 +53,9 @@ from optlight.spec import (
     Problem,
     SolverSpec,
     TrajectorySpec,
-    check_memory,
-    check_trajectory_size,
     load_problem,
-    planned_captures,
 )
+from optlight.spec.sizing import check_memory, check_trajectory_size, planned_captures
 
 Array = NDArray[np.float64]
 
@@ -108,7 +106,7 @@ class Setup:
     def from_problem(cls, problem: Problem | str | Path) -> Setup:
         """Build the setup of a problem (a :class:`Problem`, a file path or a built-in name)."""
         problem = problem if isinstance(problem, Problem) else load_problem(problem)
-        check_memory(problem)  # this machine's memory (spec.check_memory), before the large allocations
+        check_memory(problem)  # this machine's memory (spec.sizing.check_memory), before the large allocations
         scene = Scene.from_problem(problem)
         search_scene = _search_scene(scene, problem.landmarks.resolution)
         objective = Objective.from_problem(problem, scene)

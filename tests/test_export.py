@@ -29,7 +29,7 @@ from optlight.motion import Trajectory
 from optlight.planning.timing import time_parameterize
 from optlight.planning.waypoints import controller_waypoints
 from optlight.scene.camera import Camera
-from optlight.spec import image_names
+from optlight.spec.sizing import image_names
 from optlight.verify import VerificationReport, verify_trajectory
 from optlight.viz.drawing import FigureJob
 from optlight.viz.trajectory_figures import save_trajectory_figure, trajectory_figure

@@ -244,7 +244,7 @@ def test_memory_estimate_bounds_the_measured_growth() -> None:
     resolution), measured as its peak resident memory above what the process held before it (Linux:
     VmHWM reset through /proc/self/clear_refs), in fresh processes at two sizes; and more histogram
     bins cost next to nothing per pixel (the NumPy kernel is chunked)."""
-    from optlight.spec import MEMORY_BYTES_PER_PIXEL
+    from optlight.spec.sizing import MEMORY_BYTES_PER_PIXEL
 
     def growth(n: int, bins: int) -> float:
         run = subprocess.run(
@@ -261,21 +261,21 @@ def test_memory_estimate_bounds_the_measured_growth() -> None:
 
 def test_a_camera_whose_solve_does_not_fit_names_the_key(monkeypatch: pytest.MonkeyPatch) -> None:
     """Checked where the problem is built (this machine's memory), not when the file is loaded."""
-    import optlight.spec as spec
+    import optlight.spec.sizing as sizing
 
     problem = problem_from_dict(default_dict())
-    need = spec.estimated_peak_memory(problem)
-    monkeypatch.setattr(spec, "available_memory", lambda: need / spec.MEMORY_SAFETY * 0.99)
+    need = sizing.estimated_peak_memory(problem)
+    monkeypatch.setattr(sizing, "available_memory", lambda: need / sizing.MEMORY_SAFETY * 0.99)
     problem_from_dict(default_dict())  # loading is not refused
     with pytest.raises(ProblemError) as err:
-        spec.check_memory(problem)
+        sizing.check_memory(problem)
     assert err.value.key == "camera.width" and "camera.height" in str(err.value) and "GB" in str(err.value)
     with pytest.raises(ProblemError, match="camera.width"):
         Setup.from_problem(problem)  # refused before it builds anything
-    monkeypatch.setattr(spec, "available_memory", lambda: need / spec.MEMORY_SAFETY * 1.01)
-    spec.check_memory(problem)
-    monkeypatch.setattr(spec, "available_memory", lambda: None)  # unknown: not checked
-    spec.check_memory(problem)
+    monkeypatch.setattr(sizing, "available_memory", lambda: need / sizing.MEMORY_SAFETY * 1.01)
+    sizing.check_memory(problem)
+    monkeypatch.setattr(sizing, "available_memory", lambda: None)  # unknown: not checked
+    sizing.check_memory(problem)
 
 
 def test_values_are_echoed_as_written() -> None:

@@ -28,12 +28,12 @@ from conftest import reduced_problem
 from PIL import Image
 
 import optlight
-import optlight.spec
+import optlight.spec.sizing
 from optlight.cli import main
 from optlight.errors import ProblemError
 from optlight.export import STAGING_PREFIX
 from optlight.setup import reach_bound
-from optlight.spec import check_trajectory_samples, least_move_time
+from optlight.spec.sizing import check_trajectory_samples, least_move_time
 from optlight.threads import max_local_workers
 from optlight.viz.images import save_gray_png, written_by_optlight
 
@@ -378,7 +378,7 @@ def test_refused_in_process(
 ) -> None:
     root, files = workspace
     monkeypatch.chdir(root)
-    monkeypatch.setattr(optlight.spec, "available_memory", lambda: MEMORY_BYTES)
+    monkeypatch.setattr(optlight.spec.sizing, "available_memory", lambda: MEMORY_BYTES)
     for module, work in WORK.items():  # refused in the checks: the work itself never starts
         monkeypatch.setattr(importlib.import_module(module), work, started)
     before = snapshot(root)
@@ -497,8 +497,8 @@ def test_least_move_time_bounds_every_timed_move(timing: str) -> None:
 def test_a_timed_trajectory_too_long_for_the_memory_names_its_cause(monkeypatch: pytest.MonkeyPatch) -> None:
     """The check on the timed trajectory itself: a rate the trajectory's samples cannot hold names
     rate_hz with the largest rate that fits; a long motion names velocity_scale; long dwells dwell_s."""
-    monkeypatch.setattr(optlight.spec, "available_memory", lambda: MEMORY_BYTES)
-    budget = optlight.spec.trajectory_samples_budget(reduced_problem(camera_px=64), 7)
+    monkeypatch.setattr(optlight.spec.sizing, "available_memory", lambda: MEMORY_BYTES)
+    budget = optlight.spec.sizing.trajectory_samples_budget(reduced_problem(camera_px=64), 7)
     assert budget is not None and budget > 0
     fast = reduced_problem(camera_px=64, trajectory={"rate_hz": 1e6})
     check_trajectory_samples(fast, 7, budget / 1e6 * 0.99, 1.0)  # fits
@@ -523,9 +523,9 @@ def test_a_solve_whose_timed_trajectory_outgrows_the_memory_stops_before_samplin
     import optlight.pipeline
 
     problem = reduced_problem(camera_px=64, landmarks={"count": 6})
-    per_sample = optlight.spec.SAMPLE_BYTES_PER_JOINT * 7
-    memory = (optlight.spec.estimated_peak_memory(problem) + 3500 * per_sample) / optlight.spec.MEMORY_SAFETY
-    monkeypatch.setattr(optlight.spec, "available_memory", lambda: memory)
+    per_sample = optlight.spec.sizing.SAMPLE_BYTES_PER_JOINT * 7
+    memory = (optlight.spec.sizing.estimated_peak_memory(problem) + 3500 * per_sample) / optlight.spec.sizing.MEMORY_SAFETY
+    monkeypatch.setattr(optlight.spec.sizing, "available_memory", lambda: memory)
     monkeypatch.setattr(optlight.pipeline, "verify_knots", started)
     cause = r"(robot\.velocity_scale|trajectory\.dwell_s): .*the timed trajectory lasts"
     with pytest.raises(ProblemError, match=cause):
