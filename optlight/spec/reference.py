@@ -39,7 +39,7 @@ def reference_markdown() -> str:
     lines = [
         "# Problem files",
         "",
-        "<!-- generated from optlight/spec.py by `make docs`; do not edit by hand -->",
+        "<!-- generated from optlight/spec/ by `make docs`; do not edit by hand -->",
         "",
         "A problem file is TOML. Every key is optional; a missing key takes its default. Unknown keys,",
         "wrong types and out-of-range values are errors that name the file and the key. Lengths are in",
