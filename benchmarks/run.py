@@ -452,7 +452,7 @@ def solve_rows(name: str, result: Result) -> list[Row]:
     ours, baseline = result["plan"], result["baseline"]
 
     def base(key: str) -> float | None:
-        return None if baseline is None else float(baseline[key]["median"])
+        return None if baseline is None or key not in baseline else float(baseline[key]["median"])
 
     def row(metric: str, key: str, success_pct: float | None = None) -> Row:
         return Row(label, metric, ours[key]["median"], ours[key]["p98"], success_pct, base(key))

@@ -284,3 +284,14 @@ def test_cell_benchmark_counts_outcomes_and_reasons(runner: ModuleType) -> None:
     rows = runner.cell_rows("cells", summary)
     assert rows[0].median == 50.0
     assert any(r.metric == "refused: ProblemError:robot.start [cells]" and r.median == 1 for r in rows)
+
+
+def test_a_plan_metric_the_baseline_lacks_has_no_baseline(runner: ModuleType) -> None:
+    """The rest-to-rest bound is the plan's own: the paper's per-knot IK baseline does not measure it."""
+    dist = {"median": 2.0, "p98": 3.0}
+    keys = ("time_s", "joint_path_length_rad", "motion_time_s", "max_h_residual_m", "nlp_iterations")
+    plan = {key: dist for key in (*keys, "rest_to_rest_s", "motion_bound_ratio")}
+    baseline = {key: {"median": 8.0, "p98": 9.0} for key in keys}
+    rows = runner.solve_rows("solve", {"problem": "p", "success_pct": 100.0, "plan": plan, "baseline": baseline})
+    bound = next(r for r in rows if r.metric == "rest-to-rest bound [s]")
+    assert bound.ratio is None and rows[0].ratio == 0.25
