@@ -332,7 +332,7 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
     """The light at zenith 25°, azimuth 0° of the default cell, the posture nearest θ_ref: started
     from the IK's angles, which hold the light already, IPOPT ends on the posture it reaches from
     θ_ref itself, in fewer iterations (6 against 41 here), and pinocchio puts the light there."""
-    import optlight.planning.placement as placement
+    from optlight.planning.placement import clear_posture
 
     robot, sphere, env = small_setup.robot, small_setup.sphere, small_setup.environment
     assert env is not None
@@ -346,7 +346,7 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
         iterations.append(solved.iterations)
         return solved
 
-    monkeypatch.setattr(placement, "run", counted)
+    monkeypatch.setattr(clear_posture, "run", counted)
     posture = ClearPosture(small_setup, env)
     cold = posture.solve(light, robot.theta_ref)
     cold_iterations = sum(iterations)

@@ -371,7 +371,6 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
     CasADi's sparsity, so IPOPT's linear algebra is the same."""
     from conftest import reduced_problem
 
-    from optlight.planning import placement
     from optlight.planning.nlp import environment_rows
     from optlight.planning.placement import ClearPosture
     from optlight.planning.trajectory import transfer
@@ -403,7 +402,7 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
     transfer._transfer_nlp(setup, rows, *ends, initial)
     transfer._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
     posture = ClearPosture(setup, env)
-    monkeypatch.setattr(placement.ca, "nlpsol", capture)
+    monkeypatch.setattr(ca, "nlpsol", capture)
     posture._solver(np.random.default_rng(6).random((1, env.clearance_function(robot).size1_out(0))) < 0.2, False)
     assert len(captured) == 7
     rng = np.random.default_rng(4)
