@@ -171,29 +171,63 @@ class CollisionModel:
         self.view_cone = view_cone
         self.margin = float(margin)
         self.self_margin = float(self_margin)
+        geom, surfaces, robot_pairs = self._robot_geometry(robot)
+        light_id = self._add_housing(geom, housing, housing_offset, surfaces)
+        body_of = self._group_bodies(geom, light_id)
+        n_robot = len(geom.geometryObjects)
+        candidates = self._self_candidates(geom, robot_pairs, light_id) if self_collision else []
+        obstacle_ids, cone_id = self._add_scene(geom)
+        self.geometry = geom
+        self.geometry_data = pin.GeometryData(geom)
+        touching, exact_ref = self._touching_at_reference(candidates, body_of)
+        self.pairs = self._collision_pairs(n_robot, candidates, touching, obstacle_ids, cone_id, body_of)
+        self.motion_weights = self._motion_weights(n_robot)
+        self._sphere_rows(surfaces, max_spheres, obstacle_ids, body_of, exact_ref)
+
+    # ------------------------------------------------------------------ builders (in __init__'s order)
+    @staticmethod
+    def _robot_geometry(
+        robot: Robot,
+    ) -> tuple[pin.GeometryModel, list[trimesh.Trimesh], list[tuple[int, int]]]:
+        """The robot's collision geometry with each shape replaced by its convex hull (coal's
+        distances), the true surfaces (robot frame at the parent joint, for the sphere fit) and the
+        robot-only pairs: all pairs on different joints, minus the SRDF's."""
         model = robot.model
         geom = robot.geometry_model("collision")
         surfaces: list[trimesh.Trimesh] = []
         for obj in geom.geometryObjects:
             surfaces.append(_surface(obj.geometry, obj.name).apply_transform(obj.placement.homogeneous))
             obj.geometry = _convex(obj.geometry)
-
-        # Robot-only pairs: all pairs on different joints, minus the SRDF's.
         geom.addAllCollisionPairs()
         srdf = robot_srdf(robot)
         if srdf is not None:
             pin.removeCollisionPairs(model, geom, str(srdf))
         robot_pairs = [(cp.first, cp.second) for cp in geom.collisionPairs]
         geom.removeAllCollisionPairs()
+        return geom, surfaces, robot_pairs
 
-        # Light housing: its shape centred ``housing_offset`` behind the light frame, along −z_L.
-        light_frame = model.frames[robot.light_frame_id]
+    def _add_housing(
+        self,
+        geom: pin.GeometryModel,
+        housing: coal.CollisionGeometry,
+        housing_offset: float,
+        surfaces: list[trimesh.Trimesh],
+    ) -> int:
+        """Add the light housing, its shape centred ``housing_offset`` (m) behind the light frame
+        along −z_L, to ``geom`` and its surface to ``surfaces``; its geometry index."""
+        model = self.robot.model
+        light_frame = model.frames[self.robot.light_frame_id]
         placement = light_frame.placement * pin.SE3(np.eye(3), np.array([0.0, 0.0, -housing_offset]))
         light_id = geom.addGeometryObject(
-            pin.GeometryObject(LIGHT, light_frame.parentJoint, robot.light_frame_id, placement, housing)
+            pin.GeometryObject(LIGHT, light_frame.parentJoint, self.robot.light_frame_id, placement, housing)
         )
         surfaces.append(_surface(housing, LIGHT).apply_transform(placement.homogeneous))
+        return int(light_id)
 
+    def _group_bodies(self, geom: pin.GeometryModel, light_id: int) -> dict[int, Body]:
+        """Set :attr:`bodies` (the geometry objects grouped by their link, the housing as the light);
+        the body of each geometry index."""
+        model = self.robot.model
         names: dict[str, list[int]] = {}
         joint_of: dict[str, int] = {}
         for g, obj in enumerate(geom.geometryObjects):
@@ -201,7 +235,14 @@ class CollisionModel:
             names.setdefault(body, []).append(g)
             joint_of[body] = int(obj.parentJoint)
         self.bodies = tuple(Body(n, joint_of[n], tuple(gs)) for n, gs in names.items())
-        body_of = {g: b for b in self.bodies for g in b.geometries}
+        return {g: b for b in self.bodies for g in b.geometries}
+
+    def _self_candidates(
+        self, geom: pin.GeometryModel, robot_pairs: list[tuple[int, int]], light_id: int
+    ) -> list[tuple[int, int]]:
+        """The self pairs worth checking: the robot pairs and the light against every robot
+        geometry, minus those on the same or adjacent joints."""
+        model = self.robot.model
         n_robot = len(geom.geometryObjects)
 
         def adjacent(a: int, b: int) -> bool:
@@ -210,24 +251,30 @@ class CollisionModel:
 
         candidates = [(a, b) for a, b in robot_pairs if not adjacent(a, b)]
         candidates += [(light_id, g) for g in range(n_robot) if g != light_id and not adjacent(light_id, g)]
-        if not self_collision:  # the view alone: no self pairs, no self rows
-            candidates = []
-        obstacle_ids = []
-        for obs in obstacles:
-            obstacle_ids.append(
-                geom.addGeometryObject(pin.GeometryObject(obs.name, 0, 0, obs.placement, obs.coal_geometry()))
-            )
-        cone_id = None
-        if view_cone is not None:
-            cone_id = geom.addGeometryObject(
-                pin.GeometryObject(VIEW_CONE, 0, 0, view_cone.placement, view_cone.coal_geometry())
-            )
-        self.geometry = geom
-        self.geometry_data = pin.GeometryData(geom)
+        return candidates
 
-        # Self pairs touching at θ_ref are touching by design.
+    def _add_scene(self, geom: pin.GeometryModel) -> tuple[list[int], int | None]:
+        """Add the obstacles and the view cone (world-fixed) to ``geom``; their geometry indices."""
+        obstacle_ids = [
+            geom.addGeometryObject(pin.GeometryObject(obs.name, 0, 0, obs.placement, obs.coal_geometry()))
+            for obs in self.obstacles
+        ]
+        cone_id = None
+        if self.view_cone is not None:
+            cone_id = geom.addGeometryObject(
+                pin.GeometryObject(VIEW_CONE, 0, 0, self.view_cone.placement, self.view_cone.coal_geometry())
+            )
+        return obstacle_ids, cone_id
+
+    def _touching_at_reference(
+        self, candidates: list[tuple[int, int]], body_of: dict[int, Body]
+    ) -> tuple[set[tuple[int, int]], dict[tuple[str, str], float]]:
+        """Place the geometry at θ_ref and measure the candidate self pairs there: those in contact
+        are touching by design (set :attr:`ignored_self_pairs`). The touching pairs and the exact
+        distance (m) per self body pair at θ_ref."""
+        robot = self.robot
         pin.updateGeometryPlacements(
-            model, robot.data, geom, self.geometry_data, robot.to_pin(robot.theta_ref)
+            robot.model, robot.data, self.geometry, self.geometry_data, robot.to_pin(robot.theta_ref)
         )
         reference = {(a, b): self.distance(a, b) for a, b in candidates}
         touching = {pair for pair, d in reference.items() if d <= 0.0}
@@ -236,11 +283,26 @@ class CollisionModel:
             pair = _ordered(body_of[a].name, body_of[b].name)
             exact_ref[pair] = min(exact_ref.get(pair, np.inf), d)
         self.ignored_self_pairs = tuple(sorted({(body_of[a].name, body_of[b].name) for a, b in touching}))
+        return touching, exact_ref
+
+    def _collision_pairs(
+        self,
+        n_robot: int,
+        candidates: list[tuple[int, int]],
+        touching: set[tuple[int, int]],
+        obstacle_ids: list[int],
+        cone_id: int | None,
+        body_of: dict[int, Body],
+    ) -> tuple[Pair, ...]:
+        """The checked pairs: every moving robot geometry against every obstacle (``margin``), the
+        candidate self pairs not touching at θ_ref (``self_margin``) and, with a view cone, every
+        moving geometry against it (margin 0)."""
+        geom = self.geometry
         moving = [g for g in range(n_robot) if geom.geometryObjects[g].parentJoint != 0]
         pairs = [
             Pair("obstacle", g, o, body_of[g].name, obs.name, self.margin)
             for g in moving
-            for o, obs in zip(obstacle_ids, obstacles, strict=True)
+            for o, obs in zip(obstacle_ids, self.obstacles, strict=True)
         ]
         pairs += [
             Pair("self", a, b, body_of[a].name, body_of[b].name, self.self_margin)
@@ -249,10 +311,19 @@ class CollisionModel:
         ]
         if cone_id is not None:
             pairs += [Pair("view", g, cone_id, body_of[g].name, VIEW_CONE, 0.0) for g in moving]
-        self.pairs = tuple(pairs)
-        self.motion_weights = self._motion_weights(n_robot)
+        return tuple(pairs)
 
-        # Spheres, their rows.
+    def _sphere_rows(
+        self,
+        surfaces: list[trimesh.Trimesh],
+        max_spheres: int,
+        obstacle_ids: list[int],
+        body_of: dict[int, Body],
+        exact_ref: dict[tuple[str, str], float],
+    ) -> None:
+        """Fit the spheres to each body's true surfaces and set their rows and margins (class
+        docstring): obstacle and view rows, beam rows, self rows."""
+        robot = self.robot
         self.spheres = RobotSpheres(
             tuple(
                 BodySpheres(b.name, b.joint, *fit_spheres([surfaces[g] for g in b.geometries], max_spheres))
@@ -263,19 +334,24 @@ class CollisionModel:
         self.obstacle_rows, self.view_rows = self._reachable_rows()
         # The beam: every sphere but those carried with the light (they stand where they stand
         # relative to its beam at any θ, so no plan can move them out of it).
-        light_joint = int(model.frames[robot.light_frame_id].parentJoint)
+        light_joint = int(robot.model.frames[robot.light_frame_id].parentJoint)
         self.beam_rows = np.flatnonzero(self.spheres.joint != light_joint)
         self.obstacle_row_margin = self._obstacle_row_margins(robot, obstacle_ids)
+        self.self_rows = self._self_sphere_rows()
+        self.self_row_margin = self._self_row_margins(robot, touching_free=exact_ref)
+
+    def _self_sphere_rows(self) -> NDArray[np.int64]:
+        """(S_s, 2) every (sphere, sphere) pair of the bodies of the self pairs (lower body first)."""
         body_index = {b.name: i for i, b in enumerate(self.bodies)}
         self_bodies = sorted(
             {
                 tuple(sorted((body_index[p.first_body], body_index[p.second_name])))
-                for p in pairs
+                for p in self.pairs
                 if p.kind == "self"
             }
         )
         sb = self.spheres.body
-        self.self_rows = np.array(
+        return np.array(
             [
                 (s, t)
                 for a, b in self_bodies
@@ -284,7 +360,6 @@ class CollisionModel:
             ],
             dtype=int,
         ).reshape(-1, 2)
-        self.self_row_margin = self._self_row_margins(robot, touching_free=exact_ref)
 
     # ------------------------------------------------------------------ helpers
     def _obstacle_row_margins(self, robot: Robot, obstacle_ids: list[int]) -> Array:

@@ -154,6 +154,7 @@ def test_rows_left_out_that_the_solution_breaks_join_the_nlp(
     """With no row near enough to start with (a negative distance), the first solve goes through the
     obstacles; the rows it breaks join and the knots come out clear, as with every row."""
     from optlight.planning import trajectory
+    from optlight.planning.trajectory import active_rows
 
     solves: list[int] = []
     real = trajectory.TrajectoryOptimizer.solve
@@ -163,7 +164,7 @@ def test_rows_left_out_that_the_solution_breaks_join_the_nlp(
         return real(self, *args)
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", counting)
-    monkeypatch.setattr(trajectory, "ACTIVE_DISTANCE", -1.0)
+    monkeypatch.setattr(active_rows, "ACTIVE_DISTANCE", -1.0)
     setup = constrained.setup
     result = trajectory.optimize_knots(setup, constrained.path, constrained.knot_ik)
     assert len(solves) >= 2 and solves[0] == 0 and 0 < solves[1] < env_rows(constrained)
@@ -182,25 +183,26 @@ def test_the_transfer_nlp_with_the_rows_that_can_bind_finds_the_all_rows_transfe
     solved with every row (ACTIVE_DISTANCE infinite selects them all), clear of every row by the
     padding (the NumPy sphere model, pinocchio), in fewer rows (the same cost to 1e-6)."""
     from optlight.planning import trajectory
+    from optlight.planning.trajectory import active_rows, transfer
 
     sizes: list[int] = []
-    real = trajectory._transfer_nlp
+    real = transfer._transfer_nlp
 
     def counting(setup: Setup, rows: object, *args: object) -> tuple[np.ndarray | None, str]:
         sizes.append(rows.size1_out(0))  # type: ignore[attr-defined]
         return real(setup, rows, *args)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(trajectory, "_transfer_nlp", counting)
+    monkeypatch.setattr(transfer, "_transfer_nlp", counting)
     setup = constrained.setup
     env = setup.environment
     assert env is not None
     last = constrained.nlp.theta[-1]
     active = trajectory.plan_transfer(setup, last, setup.start)
     assert sizes, "the transfer NLP did not run"
-    active_rows = sizes[-1]
-    monkeypatch.setattr(trajectory, "ACTIVE_DISTANCE", np.inf)
+    near_row_count = sizes[-1]
+    monkeypatch.setattr(active_rows, "ACTIVE_DISTANCE", np.inf)
     every = trajectory.plan_transfer(setup, last, setup.start)
-    assert active_rows < sizes[-1]
+    assert near_row_count < sizes[-1]
     line_worst = min(env.sphere_clearance(setup.robot, t)[0].min() for t in np.linspace(last, setup.start, 20))
     assert line_worst < trajectory.TRANSFER_PADDING
     np.testing.assert_allclose(active, every, atol=1e-4)  # IPOPT's tolerance apart
@@ -331,7 +333,7 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
     """The light at zenith 25°, azimuth 0° of the default cell, the posture nearest θ_ref: started
     from the IK's angles, which hold the light already, IPOPT ends on the posture it reaches from
     θ_ref itself, in fewer iterations (6 against 41 here), and pinocchio puts the light there."""
-    import optlight.planning.placement as placement
+    from optlight.planning.placement import clear_posture
 
     robot, sphere, env = small_setup.robot, small_setup.sphere, small_setup.environment
     assert env is not None
@@ -345,7 +347,7 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
         iterations.append(solved.iterations)
         return solved
 
-    monkeypatch.setattr(placement, "run", counted)
+    monkeypatch.setattr(clear_posture, "run", counted)
     posture = ClearPosture(small_setup, env)
     cold = posture.solve(light, robot.theta_ref)
     cold_iterations = sum(iterations)

@@ -123,7 +123,7 @@ def test_azimuth_mode_builds_no_nlp_and_reports_progress(problem: Problem, monke
         built.append(args[0])
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(lm_module.ca, "nlpsol", counting)
+    monkeypatch.setattr(ca, "nlpsol", counting)
     calls: list[tuple[int, int]] = []
     small = small_problem(count=3, seeds=2)
     out = find_landmarks(Setup.from_problem(small), progress=lambda done, total: calls.append((done, total)))

@@ -20,9 +20,9 @@ from optlight import pipeline as pipeline_module
 from optlight.errors import UnreachableError
 from optlight.geometry import h_residual
 from optlight.pipeline import PlacementAhead
-from optlight.planning import placement as placement_module
 from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
 from optlight.planning.placement import LightPlacement, PlacementResult
+from optlight.planning.placement import light as placement_module
 from optlight.planning.policy import PlacementChain, Reacher, place_landmarks
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup

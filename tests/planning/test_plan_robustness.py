@@ -261,6 +261,7 @@ def test_the_planners_path_allowance_is_within_the_verifications_tolerance() -> 
     """The planner keeps the spline within half the verification's tolerance of the planned path and
     measures it with its own polyline distance, which agrees with the verifier's (k-d tree pruned)."""
     from optlight.planning import trajectory
+    from optlight.planning.trajectory import following
     from optlight.verify import Tolerances, distance_to_polyline
 
     assert trajectory.PATH_DEVIATION_M <= 0.5 * Tolerances().path_m
@@ -269,5 +270,5 @@ def test_the_planners_path_allowance_is_within_the_verifications_tolerance() -> 
     polyline = np.cumsum(rng.normal(scale=0.02, size=(40, 3)), axis=0)
     points = polyline[rng.integers(0, 40, 300)] + rng.normal(scale=0.01, size=(300, 3))
     np.testing.assert_allclose(
-        trajectory._polyline_distance(points, polyline), distance_to_polyline(points, polyline), atol=1e-12
+        following._polyline_distance(points, polyline), distance_to_polyline(points, polyline), atol=1e-12
     )

@@ -304,14 +304,15 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
     """A knot the per-knot IK missed leaves the warm start centimetres off the sphere: the small
     barrier has no feasible point to stay near, so a failed solve is not tried again."""
     from optlight.planning import trajectory
+    from optlight.planning.trajectory import knots
 
     _, _, path, warm = setup
     barriers, budgets = _failing_tries(monkeypatch)
     free = replace(small_setup, environment=None)
-    assert trajectory._warm_start_on_sphere(free, path, warm)
+    assert knots._warm_start_on_sphere(free, path, warm)
     missed = warm.copy()
     missed[3] += 0.05  # one knot: the light ~2 cm off the sphere
-    assert not trajectory._warm_start_on_sphere(free, path, missed)
+    assert not knots._warm_start_on_sphere(free, path, missed)
     with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
         trajectory.optimize_knots(free, path, missed)
     assert barriers == [None]
@@ -343,6 +344,7 @@ def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Set
     """With a retry to follow, IPOPT itself stops the first try after FIRST_TRY_ITER iterations (3
     here, where it needs more), and the retry from the small barrier solves the NLP."""
     from optlight.planning import trajectory
+    from optlight.planning.trajectory import knots
 
     _, _, path, warm = setup
     real = trajectory.TrajectoryOptimizer.solve
@@ -353,7 +355,7 @@ def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Set
         return tries[-1]
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", recorded)
-    monkeypatch.setattr(trajectory, "FIRST_TRY_ITER", 3)
+    monkeypatch.setattr(knots, "FIRST_TRY_ITER", 3)
     free = replace(small_setup, environment=None)
     result = trajectory.optimize_knots(free, path, warm)
     assert [(t.status, t.iterations) for t in tries[:1]] == [("Maximum_Iterations_Exceeded", 3)]
@@ -369,9 +371,9 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
     CasADi's sparsity, so IPOPT's linear algebra is the same."""
     from conftest import reduced_problem
 
-    from optlight.planning import placement, trajectory
     from optlight.planning.nlp import environment_rows
     from optlight.planning.placement import ClearPosture
+    from optlight.planning.trajectory import transfer
 
     setup = Setup.from_problem(reduced_problem("table_wall"))
     env, robot = setup.environment, setup.robot
@@ -382,7 +384,7 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
         captured.append((nlp, options))
         return real(name, plugin, nlp, options)
 
-    monkeypatch.setattr(trajectory.ca, "nlpsol", capture)
+    monkeypatch.setattr(ca, "nlpsol", capture)
     values = env.clearance_values(robot, robot.theta_ref[None])[0]
     near = np.flatnonzero(values < 0.3)
     clearance = env.clearance_function(robot, near)
@@ -397,10 +399,10 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
     q = ca.MX.sym("q", robot.n)
     rows = ca.Function("rows", [q], [environment_rows(env, robot, q)])
     ends, initial = (robot.theta_ref, robot.theta_ref + 0.3), robot.theta_ref + np.zeros((4, 1))
-    trajectory._transfer_nlp(setup, rows, *ends, initial)
-    trajectory._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
+    transfer._transfer_nlp(setup, rows, *ends, initial)
+    transfer._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
     posture = ClearPosture(setup, env)
-    monkeypatch.setattr(placement.ca, "nlpsol", capture)
+    monkeypatch.setattr(ca, "nlpsol", capture)
     posture._solver(np.random.default_rng(6).random((1, env.clearance_function(robot).size1_out(0))) < 0.2, False)
     assert len(captured) == 7
     rng = np.random.default_rng(4)
