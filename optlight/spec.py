@@ -26,7 +26,7 @@ from optlight.errors import ProblemError
 
 Vec3 = tuple[float, float, float]
 
-#: Robots that load by name (example-robot-data); :mod:`optlight.robot.loading` has their details.
+#: Robots that load by name (example-robot-data); :mod:`optlight.robot.catalogue` has their details.
 ROBOT_NAMES: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
 
 #: Largest seed of a random generator: NumPy's and Mitsuba's (a 32-bit sample seed, offset per capture).
