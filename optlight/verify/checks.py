@@ -75,11 +75,7 @@ def verify_trajectory(
     if rate_hz < 1000.0:
         raise ValueError(f"rate_hz must be at least 1000 Hz, got {rate_hz}")
 
-    t = _verification_times(trajectory, rate_hz)
-    q, qd, qdd = trajectory.sample(t)
-    n = trajectory.dof
-    names = list(trajectory.joint_names) if trajectory.joint_names else [f"j{i}" for i in range(n)]
-    collector = Collector(t, names)
+    collector, (q, qd, qdd) = _sampled(trajectory, rate_hz)
 
     skipped = limit_checks(collector, trajectory, (q, qd, qdd), limits, rate_hz, tol)
     skipped += light_checks(collector, trajectory, q, light_pose, sphere, landmarks, planned_path, transfers, tol)
@@ -89,22 +85,16 @@ def verify_trajectory(
         skipped += ("interpolation",)
     torques: TorqueSummary | None = None
     if dynamics is not None:
-        torques = torque_check(collector, dynamics, q, qd, qdd, names)
+        torques = torque_check(collector, dynamics, q, qd, qdd, collector.names)
     if torques is None or torques.limit_nm is None:
         skipped += ("torque",)
-    if environment is not None:
-        environment_checks(collector, environment(q, t, trajectory.capture_times), t.size)
-    if view is not None:
-        captures = trajectory.capture_times
-        view_checks(collector, view(trajectory.sample(captures)[0], captures))
-    else:
-        skipped += ("view", "beam")
+    skipped += _surroundings_checks(collector, trajectory, q, environment, view)
 
     return VerificationReport(
         checks=collector.checks,
         violations=tuple(collector.violations),
         duration_s=trajectory.duration,
-        samples=int(t.size),
+        samples=int(collector.t.size),
         rate_hz=float(rate_hz),
         tolerances=tol,
         skipped=skipped,
@@ -112,6 +102,32 @@ def verify_trajectory(
         advisory=tuple(a for a in advisory if a in collector.checks),
         torques=torques,
     )
+
+
+def _sampled(trajectory: Trajectory, rate_hz: float) -> tuple[Collector, tuple[Array, Array, Array]]:
+    """A collector at the verification's sample times (:func:`_verification_times`), and q, q̇, q̈ there."""
+    t = _verification_times(trajectory, rate_hz)
+    n = trajectory.dof
+    names = list(trajectory.joint_names) if trajectory.joint_names else [f"j{i}" for i in range(n)]
+    return Collector(t, names), trajectory.sample(t)
+
+
+def _surroundings_checks(
+    collector: Collector,
+    trajectory: Trajectory,
+    q: Array,
+    environment: EnvironmentCheck | None,
+    view: ViewCheck | None,
+) -> tuple[str, ...]:
+    """The environment's checks at the samples q and the view and beam checks at the captures, each
+    when given. Returns the names of the checks skipped."""
+    if environment is not None:
+        environment_checks(collector, environment(q, collector.t, trajectory.capture_times), collector.t.size)
+    if view is None:
+        return ("view", "beam")
+    captures = trajectory.capture_times
+    view_checks(collector, view(trajectory.sample(captures)[0], captures))
+    return ()
 
 
 def _landmarks(landmark_positions: ArrayLike, trajectory: Trajectory) -> Array:
