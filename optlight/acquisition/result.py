@@ -10,12 +10,17 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.acquisition.dataset import write_dataset
+from optlight.acquisition.dataset import (
+    write_calibration,
+    write_captures_folder,
+    write_document,
+    write_round_plans,
+)
 from optlight.acquisition.measures import MEASURES, improves
 from optlight.acquisition.rounds import AWAITING, ROUNDS, round_folder, round_pattern
 from optlight.capture import Capture
 from optlight.capture.calibration import Calibration
-from optlight.export import LIGHT_DIRECTION_COLUMNS, LIGHT_FRAME, write_folder
+from optlight.export import LIGHT_DIRECTION_COLUMNS, LIGHT_FRAME, library_versions, write_folder
 from optlight.plan import Plan
 from optlight.setup import Setup
 from optlight.spec import image_names
@@ -267,8 +272,41 @@ class Acquisition:
         rounds = self.camera == "folder"
         return write_folder(
             folder,
-            lambda staging: [staging / f for f in write_dataset(self, staging)],
+            lambda staging: [staging / f for f in self._write(staging)],
             overwrite=overwrite,
             resume=ROUNDS if rounds else None,
             resumable=ROUNDS if rounds and self.status == AWAITING else None,
         )
+
+    def _write(self, root: Path) -> list[str]:
+        """The dataset folder's files (:meth:`save`) written into ``root``; their names relative to it."""
+        files: list[str] = []
+        if self.camera == "folder":
+            plans = [it.plan for it in self.iterations] + ([self.next_plan] if self.next_plan else [])
+            files += write_round_plans(root, plans)
+        else:
+            for it in self.iterations:
+                sub = Path("iterations") / f"{it.index:02d}"
+                files += [str(sub / f) for f in write_captures_folder(root / sub, it.plan, it.captures)]
+        if self.iterations:
+            files += write_captures_folder(root, self.best.plan, self.best.captures)
+        if self.calibration is not None:
+            files += write_calibration(root, self.setup.scene, self.calibration)
+        if self.iterations:
+            self.figure().savefig(root / "measured_cost.png", dpi=120)
+            files.append("measured_cost.png")
+        (root / "README.md").write_text(self.readme())
+        files.append("README.md")
+        problem = self.setup.problem.to_dict()
+        document = {
+            **self.summary(),
+            "problem_definition": problem,
+            "exposure": self.exposure,
+            "loop": problem.get("loop", {}),
+            "world": problem.get("world", {}),
+            "iterations_detail": [it.to_dict() for it in self.iterations],
+            "versions": library_versions(),
+            "files": [*files, "acquisition.json"],
+        }
+        files.append(write_document(root, document))
+        return files
