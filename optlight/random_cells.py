@@ -104,7 +104,7 @@ def _robot(rng: np.random.Generator) -> tuple[dict[str, Any], str, float]:
     """The ``[robot]`` table, its label and the arm's reach (m): a built-in arm, or (one in eight)
     an arm's URDF loaded as a user URDF."""
     if rng.random() < 1 / 8:
-        from optlight.robot.loading import example_robot_data_dir
+        from optlight.robot.catalogue import example_robot_data_dir
 
         name = str(rng.choice(sorted(USER_URDFS)))
         urdf, frame = USER_URDFS[name]

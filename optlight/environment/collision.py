@@ -42,7 +42,8 @@ from numpy.typing import NDArray
 from optlight.environment.shapes import SMOOTHING_M, HalfSpace, Obstacle, ViewCone
 from optlight.environment.spheres import BodySpheres, RobotSpheres, fit_spheres
 from optlight.errors import RobotError
-from optlight.robot.loading import ROBOTS, Robot, example_robot_data_dir
+from optlight.robot.catalogue import ROBOTS, example_robot_data_dir
+from optlight.robot.loading import Robot
 
 Array = NDArray[np.float64]
 PairKind = Literal["obstacle", "self", "view"]

@@ -10,10 +10,11 @@
 - :func:`generalized_ik` (:mod:`.ik`, tasks in :mod:`.tasks`): δθ = J# e + (I − J⁺J) γ.
 """
 
+from optlight.robot.catalogue import SUPPORTED_ROBOTS
 from optlight.robot.dynamics import Dynamics, Lamp
 from optlight.robot.ik import DEFAULT_GAINS, IKResult, generalized_ik, ik_settings, null_space_step
 from optlight.robot.kinematics import light_angles, light_residual, symbolic_frame_pose
-from optlight.robot.loading import SUPPORTED_ROBOTS, Robot, load_robot
+from optlight.robot.loading import Robot, load_robot
 from optlight.robot.tasks import (
     JointLimitTask,
     KinematicState,

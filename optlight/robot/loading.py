@@ -16,43 +16,8 @@ per joint, in URDF joint order. Pinocchio stores a continuous joint (kinova join
 (cos θ, sin θ); :meth:`Robot.to_pin` / :meth:`Robot.from_pin` convert. Continuous joints get the limits
 ±2π in θ (two full turns of cable; a trajectory never needs more), every other joint its URDF limits.
 
-**Supported robots** (``SUPPORTED_ROBOTS``), their flange frames and reference configurations:
-
-========  =======================  =============================
-robot     flange (URDF frame)      reference θ_ref
-========  =======================  =============================
-panda     ``panda_hand_tcp``       SRDF ``default``
-ur3/5/10  ``tool0``                (0, −π/2, π/2, −π/2, −π/2, 0)
-xarm7     ``link_eef``             (0, −0.5, 0, 1, 0, 1.5, 0)
-kinova    ``j2s6s200_end_effector``  SRDF ``arm_up`` [1]
-z1        ``gripperStator``        (0, 1.2, −1.0, −0.2, 0, 0)
-========  =======================  =============================
-
-[1] Joint values outside the URDF limits are wrapped by ±2π (the same pose).
-
-**Joint limits** (:data:`ROBOTS`, each row cites its source): velocity = min(URDF, the maker's
-published joint speed), acceleration and jerk from the maker where published. Where a maker publishes
-none (UR publishes no joint acceleration or jerk limits; none for kinova's JACO² or the z1 that we
-could find), the value is ours, marked so: an acceleration the maker's own motion-planning
-configuration uses where there is one, else conservative, and the jerk :data:`DEFAULT_JERK_RAMP_S`
-ramp: the acceleration limit reached in 0.05 s, J = a_max / 0.05 s. ``robot.acceleration_limit`` and
-``robot.jerk_limit`` override them (one value or one per joint).
-
-**Torque limits** (``RobotInfo.torque_limit``, N·m, checked along the plan with the lamp's mass by
-:mod:`optlight.robot.dynamics`): the maker's published joint torques where there are some (Franka's
-datasheet for panda; Universal Robots' for UR3/5/10), else the effort limits of the maker's URDF
-(xarm7, kinova, z1, and a user URDF), else none: a robot without them has its torques reported,
-not checked (:attr:`Robot.torque_limit` None).
-
-**User URDFs** (``robot.urdf``). Mesh files are found as ROS finds them (:func:`find_package`):
-``package://NAME/rest`` is ``rest`` inside the package folder NAME, looked up in the URDF's folder
-and every folder above it (nearest first: a folder named NAME, or one holding a folder NAME), then
-in each folder of the ``ROS_PACKAGE_PATH`` environment variable (the folder itself when it is
-named NAME, a folder NAME in it, or one up to :data:`PACKAGE_SEARCH_DEPTH` levels below it holding a
-``package.xml``); ``file://`` and plain paths are files, relative ones relative to the URDF. Every
-mesh must resolve when the robot is loaded; a URDF the parser rejects, a mesh that does not resolve
-and a flange frame it does not have are errors naming ``robot.urdf`` or ``robot.frame``, and the
-parser's own messages on stderr are kept out of the terminal (the first one is quoted in ours).
+The named robots, their frames and published limits are in :mod:`optlight.robot.catalogue`; a user
+URDF's files are found as :mod:`optlight.robot.urdf` describes.
 
 Kinova's and z1's tool frames point their +x out of the tool; their ``flange`` is rotated by
 Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked (closed).
@@ -61,13 +26,7 @@ Ry(+90°) so that +z does. The panda fingers and the z1 gripper joint are locked
 
 from __future__ import annotations
 
-import importlib.metadata
-import os
-import sys
-import tempfile
-import xml.etree.ElementTree as ET
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
@@ -78,185 +37,33 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.errors import ProblemError, RobotError
+from optlight.robot.catalogue import (
+    DEFAULT_JERK_RAMP_S,
+    ROBOTS,
+    SUPPORTED_ROBOTS,
+    RobotInfo,
+    example_robot_data_dir,
+)
 from optlight.robot.kinematics import (
     CONTINUOUS_JOINTS,
     PRISMATIC_JOINTS,
     REVOLUTE_JOINTS,
     symbolic_frame_pose,
 )
-from optlight.spec import ROBOT_NAMES, Problem, RobotSpec
+from optlight.robot.urdf import first_error, quiet_stderr, unread_visual_meshes, urdf_package_dirs
+from optlight.spec import Problem, RobotSpec
 
 if TYPE_CHECKING:
     import casadi
 
 Array = NDArray[np.float64]
 
-#: Robot names :func:`load_robot` knows (files from example-robot-data).
-SUPPORTED_ROBOTS: tuple[str, ...] = ROBOT_NAMES
-
 #: Limits given to continuous joints, in θ (rad).
 CONTINUOUS_LIMIT = 2 * np.pi
-
-#: Acceleration limit of a user URDF when ``robot.acceleration_limit`` is not set (rad/s²).
-DEFAULT_ACCELERATION_LIMIT = 2.0
-#: Where no jerk limit is published: the time (s) to reach the acceleration limit, J = a_max / ramp.
-DEFAULT_JERK_RAMP_S = 0.05
 
 #: The light's constraints at a capture (docs/design.md §3): h1–h3 (on the sphere, its axis through
 #: O) and the capture's zenith and azimuth. An arm with fewer joints meets them only by chance.
 LIGHT_CONSTRAINTS = 5
-
-#: How many folder levels below a ``ROS_PACKAGE_PATH`` entry :func:`find_package` looks for a package.
-PACKAGE_SEARCH_DEPTH = 3
-
-_UR_REFERENCE = (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0)
-
-
-@dataclass(frozen=True)
-class RobotInfo:
-    """Where a named robot's files are and how optlight uses it.
-
-    ``urdf``/``srdf`` are relative to example-robot-data's ``robots`` folder; ``tool_rpy_deg`` rotates
-    the URDF tool frame into the flange frame (+z out of the tool); ``reference`` names an SRDF
-    reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0;
-    ``torque_limit`` (N·m) the maker's published joint torques and ``torque_source`` where they are
-    published (None: the URDF's effort limits, if it has them).
-    """
-
-    urdf: str
-    srdf: str | None
-    tool_frame: str
-    tool_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    reference: str | None = None
-    theta_ref: tuple[float, ...] | None = None
-    locked_joints: tuple[str, ...] = ()
-    velocity_limit: tuple[float, ...] | float | None = None
-    acceleration_limit: tuple[float, ...] | float = DEFAULT_ACCELERATION_LIMIT
-    jerk_limit: tuple[float, ...] | float | None = None
-    torque_limit: tuple[float, ...] | None = None
-    torque_source: str = ""
-
-    def jerk(self) -> tuple[float, ...] | float:
-        """The published jerk limit, else the acceleration limit over :data:`DEFAULT_JERK_RAMP_S`."""
-        if self.jerk_limit is not None:
-            return self.jerk_limit
-        return tuple(np.asarray(self.acceleration_limit, float).ravel() / DEFAULT_JERK_RAMP_S)
-
-
-_DEG = np.pi / 180.0
-#: UR CB3 datasheets ("Technical specifications UR3/UR5/UR10", universal-robots.com): joint speeds.
-_UR3_SPEED = (180 * _DEG,) * 3 + (360 * _DEG,) * 3
-_UR5_SPEED = 180 * _DEG
-_UR10_SPEED = (120 * _DEG,) * 2 + (180 * _DEG,) * 4
-#: UR publishes no joint acceleration limit ("the robot does not inherently have any limits on joint
-#: accelerations (only on torques)"); UR's own MoveIt configuration uses 5 rad/s² for every joint
-#: (UniversalRobots/Universal_Robots_ROS2_Driver, ur_moveit_config/config/joint_limits.yaml).
-_UR_ACCELERATION = 5.0
-#: Universal Robots, "Max. joint torques" (universal-robots.com/articles/ur-articles/max-joint-torques,
-#: the CB3 and e-Series sizes): base, shoulder, elbow, wrist 1–3 (N·m). example-robot-data's UR3 URDF
-#: carries the UR10's efforts (330, 330, 150, 54, 54, 54) and its UR10 URDF 54 on the wrists.
-_UR_TORQUE_SOURCE = "Universal Robots, Max. joint torques (universal-robots.com)"
-_UR3_TORQUE = (56.0, 56.0, 28.0, 12.0, 12.0, 12.0)
-_UR5_TORQUE = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
-_UR10_TORQUE = (330.0, 330.0, 150.0, 56.0, 56.0, 56.0)
-#: The link pairs of a UR arm that cannot collide (MoveIt's "Adjacent" and "Never"): example-robot-data
-#: ships them for the UR5 only, but they are the same for every UR of its URDFs (the same link names
-#: and joint layout, scaled), as Universal Robots' own MoveIt configuration has one SRDF macro for
-#: every UR type (ur_moveit_config, srdf/ur_macro.srdf.xacro). Without them the UR10's base_link and
-#: upper_arm_link, 18–20 mm apart in every configuration (the shoulder offset), count as a self pair.
-_UR_SRDF = "ur_description/srdf/ur5.srdf"
-
-
-ROBOTS: dict[str, RobotInfo] = {
-    "panda": RobotInfo(
-        "panda_description/urdf/panda.urdf",
-        "panda_description/srdf/panda.srdf",
-        "panda_hand_tcp",
-        reference="default",
-        locked_joints=("panda_finger_joint1", "panda_finger_joint2"),
-        # Franka Emika, "Robot and interface specifications" (frankaemika.github.io/docs/control_parameters):
-        # q̇_max 2.175 (joints 1–4) / 2.61 rad/s, q̈_max 15 7.5 10 12.5 15 20 20 rad/s², jerk 7500 rad/s³
-        velocity_limit=(2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61),
-        acceleration_limit=(15.0, 7.5, 10.0, 12.5, 15.0, 20.0, 20.0),
-        jerk_limit=7500.0,
-        # the same page: τ_max 87 N·m (joints 1–4), 12 N·m (joints 5–7)
-        torque_limit=(87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0),
-        torque_source="Franka Emika, Robot and interface specifications",
-    ),
-    "ur3": RobotInfo(
-        "ur_description/urdf/ur3_robot.urdf",
-        _UR_SRDF,
-        "tool0",
-        theta_ref=_UR_REFERENCE,
-        torque_limit=_UR3_TORQUE,
-        torque_source=_UR_TORQUE_SOURCE,
-        velocity_limit=_UR3_SPEED,  # UR3 CB3 datasheet: base, shoulder, elbow 180°/s, wrists 360°/s
-        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
-    ),
-    "ur5": RobotInfo(
-        "ur_description/urdf/ur5_robot.urdf",
-        "ur_description/srdf/ur5.srdf",
-        "tool0",
-        theta_ref=_UR_REFERENCE,
-        torque_limit=_UR5_TORQUE,
-        torque_source=_UR_TORQUE_SOURCE,
-        velocity_limit=_UR5_SPEED,  # UR5 CB3 datasheet: every joint 180°/s
-        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
-    ),
-    "ur10": RobotInfo(
-        "ur_description/urdf/ur10_robot.urdf",
-        _UR_SRDF,
-        "tool0",
-        theta_ref=_UR_REFERENCE,
-        torque_limit=_UR10_TORQUE,
-        torque_source=_UR_TORQUE_SOURCE,
-        velocity_limit=_UR10_SPEED,  # UR10 CB3 datasheet: base, shoulder 120°/s, the others 180°/s
-        acceleration_limit=_UR_ACCELERATION,  # ours (UR's MoveIt value, see _UR_ACCELERATION)
-    ),
-    "xarm7": RobotInfo(
-        "xarm_description/urdf/xarm7.urdf",
-        "xarm_description/srdf/xarm7.srdf",
-        "link_eef",
-        theta_ref=(0.0, -0.5, 0.0, 1.0, 0.0, 1.5, 0.0),
-        # UFACTORY xArm user manual, §8 technical specifications: "Maximum Joint Speed 180°/s"
-        velocity_limit=180 * _DEG,
-        # UFACTORY's own MoveIt configuration: 20 rad/s² for every joint
-        # (xArm-Developer/xarm_ros2, xarm_moveit_config/config/xarm7/joint_limits.yaml)
-        acceleration_limit=20.0,
-    ),
-    "kinova": RobotInfo(
-        "kinova_description/robots/kinova.urdf",
-        "kinova_description/srdf/kinova.srdf",
-        "j2s6s200_end_effector",
-        tool_rpy_deg=(0.0, 90.0, 0.0),
-        reference="arm_up",
-        # the JACO² 6-DOF spherical-wrist arm (j2s6s200, Kinova Gen2, not Gen3); its URDF (Kinova's
-        # kinova-ros) has 36°/s on joints 1–3, 48°/s on 4–6. No published acceleration: ours.
-        acceleration_limit=1.0,
-    ),
-    "z1": RobotInfo(
-        "z1_description/urdf/z1.urdf",
-        "z1_description/srdf/z1.srdf",
-        "gripperStator",
-        tool_rpy_deg=(0.0, 90.0, 0.0),
-        theta_ref=(0.0, 1.2, -1.0, -0.2, 0.0, 0.0),
-        locked_joints=("jointGripper",),
-        # Unitree's URDF: π rad/s on every joint; no published acceleration: ours
-        acceleration_limit=2.0,
-    ),
-}
-
-
-def example_robot_data_dir() -> Path:
-    """The ``share`` folder of the installed example-robot-data wheel (its ``package://`` root)."""
-    try:
-        dist = importlib.metadata.distribution("example-robot-data")
-    except importlib.metadata.PackageNotFoundError:
-        raise RobotError("example-robot-data is not installed (pip install example-robot-data)") from None
-    share = Path(str(dist.locate_file("cmeel.prefix"))) / "share"
-    if not (share / "example-robot-data" / "robots").is_dir():
-        raise RobotError(f"example-robot-data has no robots folder under {share}")
-    return share
 
 
 def placement(position: ArrayLike, rpy_deg: ArrayLike) -> pin.SE3:
@@ -444,7 +251,7 @@ class Robot:
 
         Collision meshes are read from the URDF's packages (distances are taken on them). Visual
         meshes are only drawn, by the preview, which reads each file itself
-        (:mod:`optlight.viz.meshes`): by default they are not read (:func:`_unread_visual_meshes`;
+        (:mod:`optlight.viz.meshes`): by default they are not read (:func:`unread_visual_meshes`;
         reading the Panda's COLLADA files into coal costs 0.18 s, for nothing). ``read_meshes=True``
         reads them too, into axis-aligned bounding-box trees (less than half the time of the
         default OBBRSS trees), as the check of a user URDF does."""
@@ -459,9 +266,9 @@ class Robot:
                     loader = coal.MeshLoader(coal.BV_AABB)
                     geom = pin.buildGeomFromUrdf(full, str(self.urdf_path), gtype, package_dirs=dirs, mesh_loader=loader)
                 else:
-                    geom = _unread_visual_meshes(full, self.urdf_path)
+                    geom = unread_visual_meshes(full, self.urdf_path)
             except (RuntimeError, ValueError) as e:
-                detail = _first_error(said, e)
+                detail = first_error(said, e)
                 raise RobotError(
                     f"{self.name}: cannot read the {kind} meshes of {self.urdf_path}: {detail}"
                 ) from None
@@ -475,37 +282,6 @@ class Robot:
             if obj.parentJoint == 0:
                 obj.placement = self.base_placement * obj.placement
         return geom
-
-
-def _unread_visual_meshes(model: pin.Model, urdf: Path) -> pin.GeometryModel:
-    """The visual geometry of ``urdf`` as pinocchio's parser makes it (names ``<link>_<k>``, parent
-    joints and frames, placements, materials, primitives), its mesh files found but not read: the
-    parser is given the URDF with each visual ``<mesh>`` replaced by a point (a sphere of radius 0),
-    and each of those objects then gets back the mesh's file (``meshPath``, resolved as
-    :func:`resolve_mesh` does), its ``scale`` (``meshScale``) and an empty BVH as geometry, which
-    meshcat viewers take for a mesh to read from its file. Raises ValueError for a mesh file that
-    does not resolve."""
-    root = ET.parse(urdf).getroot()
-    meshes: dict[str, tuple[Path, Array]] = {}
-    for link in root.findall("link"):
-        for k, visual in enumerate(link.findall("visual")):
-            geometry = visual.find("geometry")
-            mesh = geometry.find("mesh") if geometry is not None else None
-            if geometry is None or mesh is None:
-                continue
-            filename = mesh.get("filename", "")
-            found = resolve_mesh(filename, urdf)
-            if found is None:
-                raise ValueError(f"the mesh {filename!r} does not resolve")
-            meshes[f"{link.get('name')}_{k}"] = (found, np.array(mesh.get("scale", "1 1 1").split(), float))
-            geometry.remove(mesh)
-            ET.SubElement(geometry, "sphere", radius="0")
-    geom = pin.buildGeomFromUrdfString(model, ET.tostring(root, encoding="unicode"), pin.GeometryType.VISUAL)
-    for obj in geom.geometryObjects:
-        if obj.name in meshes:
-            path, scale = meshes[obj.name]
-            obj.geometry, obj.meshPath, obj.meshScale = coal.BVHModelOBBRSS(), str(path), scale
-    return geom
 
 
 def _torque_limit(info: RobotInfo, model: pin.Model, urdf: Path) -> tuple[Array | None, str]:
@@ -549,122 +325,6 @@ def _frame_names(model: pin.Model) -> list[str]:
     return sorted({f.name for f in model.frames if f.type != pin.FrameType.JOINT})
 
 
-# --------------------------------------------------------------------------------------------
-# User URDFs: the parser's stderr, package:// lookup, mesh files
-# --------------------------------------------------------------------------------------------
-
-
-@contextmanager
-def quiet_stderr() -> Iterator[list[str]]:
-    """Send what C/C++ code writes on file descriptor 2 (urdfdom's "Error: …" lines) to a
-    temporary file instead of the terminal; the yielded list holds those lines after the block."""
-    said: list[str] = []
-    sys.stderr.flush()
-    try:
-        saved = os.dup(2)
-    except OSError:  # no stderr to redirect
-        yield said
-        return
-    with tempfile.TemporaryFile(mode="w+b") as sink:
-        os.dup2(sink.fileno(), 2)
-        try:
-            yield said
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            sink.seek(0)
-            said.extend(sink.read().decode(errors="replace").splitlines())
-
-
-def _first_error(said: Sequence[str], error: Exception) -> str:
-    """The parser's first "Error:" line when it printed one, else the exception's message."""
-    for line in said:
-        if line.strip().startswith("Error:"):
-            return f"{error} ({line.strip()[6:].strip()})"
-    return str(error)
-
-
-def find_package(name: str, urdf: Path) -> Path | None:
-    """The folder of the ROS package ``name`` for the URDF at ``urdf``, or None.
-
-    Looked up as ROS does, in this order: the URDF's folder and every folder above it, nearest first
-    (the folder itself when it is named ``name``, else a folder ``name`` in it); then each folder of
-    ``ROS_PACKAGE_PATH`` (the folder itself when it is named ``name``, a folder ``name`` in it, or a
-    folder ``name`` holding a ``package.xml`` up to :data:`PACKAGE_SEARCH_DEPTH` levels below it).
-    """
-    for folder in (urdf.parent, *urdf.parent.parents):
-        if folder.name == name:
-            return folder
-        if (folder / name).is_dir():
-            return folder / name
-    for entry in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep):
-        if not entry:
-            continue
-        root = Path(entry).expanduser()
-        if root.name == name and root.is_dir():
-            return root
-        if (root / name).is_dir():
-            return root / name
-        level = [root]
-        for _ in range(PACKAGE_SEARCH_DEPTH):
-            level = [d for f in level for d in _subfolders(f)]
-            for d in level:
-                if d.name == name and (d / "package.xml").is_file():
-                    return d
-    return None
-
-
-def _subfolders(folder: Path) -> list[Path]:
-    """The visible subfolders of ``folder`` (none where it cannot be read)."""
-    try:
-        return sorted(d for d in folder.iterdir() if d.is_dir() and not d.name.startswith("."))
-    except OSError:
-        return []
-
-
-def resolve_mesh(filename: str, urdf: Path) -> Path | None:
-    """The file a URDF ``<mesh filename=…>`` names (``package://``, ``file://`` or a path, relative
-    to the URDF), or None when it does not exist."""
-    if filename.startswith("package://"):
-        name, _, rest = filename[len("package://") :].partition("/")
-        package = find_package(name, urdf)
-        path = package / rest if package is not None else None
-    elif filename.startswith("file://"):
-        path = Path(filename[len("file://") :])
-    else:
-        path = Path(filename).expanduser()
-        path = path if path.is_absolute() else urdf.parent / path
-    return path if path is not None and path.is_file() else None
-
-
-def _urdf_package_dirs(urdf: Path, file: str) -> list[Path]:
-    """Check that every mesh of a user URDF resolves (module docstring); return the folders to give
-    pinocchio as ``package_dirs`` (it looks for ``dir/NAME/rest``): each package's parent folder."""
-    try:
-        root = ET.parse(urdf).getroot()
-    except (ET.ParseError, OSError, UnicodeDecodeError) as e:
-        raise ProblemError(file, "robot.urdf", f"a URDF file (XML: {e})", str(urdf)) from None
-    dirs: list[Path] = []
-    for mesh in root.iter("mesh"):
-        filename = mesh.get("filename", "")
-        found = resolve_mesh(filename, urdf)
-        if found is None:
-            raise ProblemError(
-                file,
-                "robot.urdf",
-                f"a URDF whose meshes exist ({filename!r} does not resolve: package://NAME is looked up in "
-                "the URDF's folder and those above it, then in ROS_PACKAGE_PATH)",
-                str(urdf),
-            )
-        if filename.startswith("package://"):
-            name = filename[len("package://") :].split("/", 1)[0]
-            package = find_package(name, urdf)
-            assert package is not None  # resolve_mesh found the file in it
-            if package.parent not in dirs:
-                dirs.append(package.parent)
-    return dirs
-
-
 def load_robot(source: Problem | RobotSpec | str) -> Robot:
     """The robot of a problem, a ``[robot]`` spec, or a robot name from :data:`SUPPORTED_ROBOTS`.
 
@@ -676,65 +336,127 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
     kinematics alone), and an unknown frame, are :class:`ProblemError` naming ``robot.urdf`` and
     ``robot.frame`` (from a spec or name, RobotError naming the key).
     """
-    file: str | None = None
+    spec, urdf, file = _robot_source(source)
+    files = _robot_files(spec, urdf, file)
+    full = _read_urdf(files.urdf_path, spec, urdf, file)
+    q_full, states = _reference_configuration(full, files, spec)
+    locked = _locked_joints(full, files, spec, q_full)
+    model = _reduced_model(full, locked, q_full, spec)
+    base = placement(spec.base_position_m, spec.base_rpy_deg)
+    _place_base(model, base)
+    _add_light_frames(model, spec, files, file)
+    theta_ref = _theta_ref(files.info, spec, full, model, locked, q_full)
+    limits = _acceleration_and_jerk(spec, files.info, model.nv)
+    torque, torque_source = _torque_limit(files.info, model, files.urdf_path)
+    robot = Robot(
+        spec.name,
+        model,
+        theta_ref=theta_ref,
+        acceleration_limit=limits["acceleration_limit"],
+        jerk_limit=limits["jerk_limit"],
+        velocity_limit=files.info.velocity_limit,
+        base_placement=base,
+        urdf_path=files.urdf_path,
+        package_dirs=files.package_dirs,
+        locked_joints=locked,
+        torque_limit=torque,
+        torque_limit_source=torque_source,
+    )
+    robot.named_configurations = {
+        name: _wrap_into_limits(_reduced_angles(full, model, locked, q), robot.lower, robot.upper)
+        for name, q in states.items()
+    }
+    return robot
+
+
+@dataclass(frozen=True)
+class _RobotFiles:
+    """A robot's catalogue entry (or one made for a user URDF), its URDF and SRDF and the folders its
+    ``package://`` meshes are found in."""
+
+    info: RobotInfo
+    urdf_path: Path
+    srdf_path: Path | None
+    package_dirs: list[Path]
+
+
+def _robot_source(source: Problem | RobotSpec | str) -> tuple[RobotSpec, Path | None, str | None]:
+    """The robot spec, its user URDF resolved (or None for a named robot) and the problem file to name
+    in errors (None outside a problem)."""
     if isinstance(source, Problem):
         spec = source.robot
         urdf = source.resolve(spec.urdf) if spec.urdf is not None else None
-        file = str(source.source) if source.source else "<inline>"
-    elif isinstance(source, RobotSpec):
-        spec = source
-        urdf = Path(spec.urdf).expanduser().resolve() if spec.urdf is not None else None
-    else:
-        spec = RobotSpec(name=source)
-        urdf = None
+        return spec, urdf, str(source.source) if source.source else "<inline>"
+    if isinstance(source, RobotSpec):
+        return source, Path(source.urdf).expanduser().resolve() if source.urdf is not None else None, None
+    return RobotSpec(name=source), None, None
 
+
+def _robot_files(spec: RobotSpec, urdf: Path | None, file: str | None) -> _RobotFiles:
+    """The files of a user URDF (every mesh checked to resolve) or of a named robot."""
     if urdf is not None:
         if not urdf.is_file():
             raise RobotError(f"robot.urdf: no file {urdf}")
         if spec.frame is None:
             raise RobotError("robot.frame: a user URDF needs the name of its flange frame")
         info = RobotInfo(str(urdf), None, spec.frame)
-        urdf_path, srdf_path = urdf, None
-        package_dirs = _urdf_package_dirs(urdf, file or str(urdf))
-    else:
-        if spec.name not in ROBOTS:
-            raise RobotError(
-                f"unknown robot {spec.name!r}; supported robots: {', '.join(SUPPORTED_ROBOTS)} "
-                "(or set robot.urdf and robot.frame)"
-            )
-        info = ROBOTS[spec.name]
-        share = example_robot_data_dir()
-        robots = share / "example-robot-data" / "robots"
-        urdf_path = robots / info.urdf
-        srdf_path = robots / info.srdf if info.srdf else None
-        package_dirs = [share]
+        return _RobotFiles(info, urdf, None, urdf_package_dirs(urdf, file or str(urdf)))
+    if spec.name not in ROBOTS:
+        raise RobotError(
+            f"unknown robot {spec.name!r}; supported robots: {', '.join(SUPPORTED_ROBOTS)} "
+            "(or set robot.urdf and robot.frame)"
+        )
+    info = ROBOTS[spec.name]
+    share = example_robot_data_dir()
+    robots = share / "example-robot-data" / "robots"
+    return _RobotFiles(info, robots / info.urdf, robots / info.srdf if info.srdf else None, [share])
 
+
+def _read_urdf(urdf_path: Path, spec: RobotSpec, urdf: Path | None, file: str | None) -> pin.Model:
+    """The full pinocchio model of the URDF, the parser's messages kept out of the terminal."""
     with quiet_stderr() as said:
         try:
-            full = pin.buildModelFromUrdf(str(urdf_path))
+            return pin.buildModelFromUrdf(str(urdf_path))
         except (RuntimeError, ValueError) as e:
             if urdf is not None and file is not None:
                 raise ProblemError(
-                    file, "robot.urdf", f"a URDF pinocchio reads ({_first_error(said, e)})", spec.urdf
+                    file, "robot.urdf", f"a URDF pinocchio reads ({first_error(said, e)})", spec.urdf
                 ) from None
-            raise RobotError(f"{spec.name}: cannot read {urdf_path}: {_first_error(said, e)}") from None
+            raise RobotError(f"{spec.name}: cannot read {urdf_path}: {first_error(said, e)}") from None
 
-    # Reference configuration (full model), then lock the hand joints at 0.
+
+def _reference_configuration(
+    full: pin.Model, files: _RobotFiles, spec: RobotSpec
+) -> tuple[Array, dict[str, Array]]:
+    """The full model's reference configuration (the catalogue's SRDF state, else neutral) and every
+    SRDF state by name."""
     q_full = pin.neutral(full)
     states: dict[str, Array] = {}
-    if srdf_path is not None:
-        pin.loadReferenceConfigurations(full, str(srdf_path))
+    if files.srdf_path is not None:
+        pin.loadReferenceConfigurations(full, str(files.srdf_path))
         states = {e.key(): np.array(e.data()) for e in full.referenceConfigurations}
-    if info.reference is not None:
-        if info.reference not in states:
-            raise RobotError(f"{spec.name}: no reference configuration {info.reference!r} in {srdf_path}")
-        q_full = states[info.reference]
-    missing = [j for j in info.locked_joints if not full.existJointName(j)]
+    reference = files.info.reference
+    if reference is not None:
+        if reference not in states:
+            raise RobotError(f"{spec.name}: no reference configuration {reference!r} in {files.srdf_path}")
+        q_full = states[reference]
+    return q_full, states
+
+
+def _locked_joints(full: pin.Model, files: _RobotFiles, spec: RobotSpec, q_full: Array) -> dict[str, float]:
+    """The hand joints to lock, each at 0 (set so in ``q_full``)."""
+    missing = [j for j in files.info.locked_joints if not full.existJointName(j)]
     if missing:
-        raise RobotError(f"{spec.name}: no joint {missing[0]!r} to lock in {urdf_path}")
-    locked = dict.fromkeys(info.locked_joints, 0.0)
+        raise RobotError(f"{spec.name}: no joint {missing[0]!r} to lock in {files.urdf_path}")
+    locked = dict.fromkeys(files.info.locked_joints, 0.0)
     for j in locked:
         q_full[full.joints[full.getJointId(j)].idx_q] = 0.0
+    return locked
+
+
+def _reduced_model(full: pin.Model, locked: dict[str, float], q_full: Array, spec: RobotSpec) -> pin.Model:
+    """The model with the locked joints reduced away; RobotError for a joint type optlight does not
+    handle."""
     model = (
         pin.buildReducedModel(full, [full.getJointId(j) for j in locked], q_full) if locked else full.copy()
     )
@@ -748,8 +470,12 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             f"{spec.name}: unsupported joint types {', '.join(bad)}; optlight handles revolute, "
             "continuous and prismatic joints"
         )
-    # Base placement: pre-multiply everything attached to the universe by T_WB.
-    base = placement(spec.base_position_m, spec.base_rpy_deg)
+    return model
+
+
+def _place_base(model: pin.Model, base: pin.SE3) -> None:
+    """Fold the base placement T_WB into the model: every joint and frame attached to the universe is
+    pre-multiplied by it."""
     for jid in range(1, model.njoints):
         if model.parents[jid] == 0:
             model.jointPlacements[jid] = base * model.jointPlacements[jid]
@@ -757,8 +483,12 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         if model.frames[f].parentJoint == 0:
             model.frames[f].placement = base * model.frames[f].placement
 
-    # Flange (tool frame with +z out of the tool) and light frames.
-    frame_name = spec.frame if spec.frame is not None else info.tool_frame
+
+def _add_light_frames(model: pin.Model, spec: RobotSpec, files: _RobotFiles, file: str | None) -> None:
+    """Add ``flange`` (the tool frame with +z out of the tool) and ``light`` = flange ·
+    T(light_offset_m, light_rpy_deg), after checking the tool frame and (a problem's robot, to be
+    planned) that the arm has at least :data:`LIGHT_CONSTRAINTS` joints."""
+    frame_name = spec.frame if spec.frame is not None else files.info.tool_frame
     if not model.existFrame(frame_name):
         expected = f"a frame of {spec.name} ({', '.join(_frame_names(model))})"
         if file is not None:
@@ -770,7 +500,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             file,
             "robot.urdf",
             f"an arm with at least {LIGHT_CONSTRAINTS} joints for the light's {LIGHT_CONSTRAINTS} constraints "
-            f"(h1–h3, zenith, azimuth); {urdf_path.name} has {model.nv} ({joints})",
+            f"(h1–h3, zenith, azimuth); {files.urdf_path.name} has {model.nv} ({joints})",
         )
     tool = model.frames[_find_frame(model, frame_name, spec.name)]
     for taken in ("flange", "light"):
@@ -778,7 +508,7 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
             raise RobotError(
                 f"{spec.name}: the URDF already has a frame named {taken!r}, which optlight adds"
             )
-    fix = placement((0, 0, 0), info.tool_rpy_deg if spec.frame is None else (0, 0, 0))
+    fix = placement((0, 0, 0), files.info.tool_rpy_deg if spec.frame is None else (0, 0, 0))
     flange_id = model.addFrame(
         pin.Frame(
             "flange",
@@ -799,45 +529,40 @@ def load_robot(source: Problem | RobotSpec | str) -> Robot:
         )
     )
 
-    def reduced_angles(q: Array) -> Array:
-        """θ of the reduced model from a configuration q of the full one."""
-        kept = [q[j.idx_q : j.idx_q + j.nq] for j in full.joints[1:] if full.names[j.id] not in locked]
-        return JointCoordinates(model).from_pin(np.concatenate(kept))
 
-    # θ_ref: the SRDF state (reduced), the catalogue's default, or (user URDF) the limits' middle.
-    theta_ref: Array | None = None
+def _reduced_angles(full: pin.Model, model: pin.Model, locked: dict[str, float], q: Array) -> Array:
+    """θ of the reduced model from a configuration q of the full one."""
+    kept = [q[j.idx_q : j.idx_q + j.nq] for j in full.joints[1:] if full.names[j.id] not in locked]
+    return JointCoordinates(model).from_pin(np.concatenate(kept))
+
+
+def _theta_ref(
+    info: RobotInfo, spec: RobotSpec, full: pin.Model, model: pin.Model, locked: dict[str, float], q_full: Array
+) -> Array | None:
+    """θ_ref: the SRDF state (reduced), the catalogue's default, or None (a user URDF: :class:`Robot`
+    takes the limits' middle)."""
     if info.reference is not None:
-        theta_ref = reduced_angles(q_full)
-    elif info.theta_ref is not None:
-        theta_ref = np.asarray(info.theta_ref, float)
-        if theta_ref.shape != (model.nv,):
-            raise RobotError(f"{spec.name}: reference has {theta_ref.size} values for {model.nv} joints")
+        return _reduced_angles(full, model, locked, q_full)
+    if info.theta_ref is None:
+        return None
+    theta_ref = np.asarray(info.theta_ref, float)
+    if theta_ref.shape != (model.nv,):
+        raise RobotError(f"{spec.name}: reference has {theta_ref.size} values for {model.nv} joints")
+    return theta_ref
+
+
+def _acceleration_and_jerk(spec: RobotSpec, info: RobotInfo, n: int) -> dict[str, Array | float]:
+    """``acceleration_limit`` and ``jerk_limit``: the spec's overrides, else the catalogue's (a jerk
+    not published is the :data:`DEFAULT_JERK_RAMP_S` ramp of the acceleration in use); one value or
+    one per joint (RobotError otherwise)."""
     accel = spec.acceleration_limit if spec.acceleration_limit is not None else info.acceleration_limit
     jerk = spec.jerk_limit if spec.jerk_limit is not None else info.jerk()
     if spec.jerk_limit is None and spec.acceleration_limit is not None and info.jerk_limit is None:
         jerk = tuple(np.asarray(accel, float).ravel() / DEFAULT_JERK_RAMP_S)  # the ramp of the override
-    limits = {}
+    limits: dict[str, Array | float] = {}
     for name, value in (("acceleration_limit", accel), ("jerk_limit", jerk)):
         arr = np.asarray(value, float)
-        if arr.ndim and arr.shape not in ((1,), (model.nv,)):
-            raise RobotError(f"robot.{name}: {arr.size} values for the {model.nv} joints of {spec.name}")
+        if arr.ndim and arr.shape not in ((1,), (n,)):
+            raise RobotError(f"robot.{name}: {arr.size} values for the {n} joints of {spec.name}")
         limits[name] = arr.ravel() if arr.shape != (1,) else arr[0]
-    torque, torque_source = _torque_limit(info, model, urdf_path)
-    robot = Robot(
-        spec.name,
-        model,
-        theta_ref=theta_ref,
-        acceleration_limit=limits["acceleration_limit"],
-        jerk_limit=limits["jerk_limit"],
-        velocity_limit=info.velocity_limit,
-        base_placement=base,
-        urdf_path=urdf_path,
-        package_dirs=package_dirs,
-        locked_joints=locked,
-        torque_limit=torque,
-        torque_limit_source=torque_source,
-    )
-    robot.named_configurations = {
-        name: _wrap_into_limits(reduced_angles(q), robot.lower, robot.upper) for name, q in states.items()
-    }
-    return robot
+    return limits

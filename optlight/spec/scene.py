@@ -8,7 +8,7 @@ from typing import Literal
 
 from optlight.spec.keys import SEED_MAX, Vec3, key, section
 
-#: Robots that load by name (example-robot-data); :mod:`optlight.robot.loading` has their details.
+#: Robots that load by name (example-robot-data); :mod:`optlight.robot.catalogue` has their details.
 ROBOT_NAMES: tuple[str, ...] = ("panda", "ur3", "ur5", "ur10", "xarm7", "kinova", "z1")
 
 

@@ -34,8 +34,9 @@ With a trajectory, an animation moves the robot's links and the light from the t
 its end; it plays once when the page opens and can be replayed or scrubbed in the viewer's
 "Animations" panel. The viewer interpolates between keyframes (positions linearly, orientations by
 slerp), so of the poses at ``fps`` frames per second only the keyframes are kept that this
-interpolation needs to stay within :data:`KEY_TOLERANCE_M` and :data:`KEY_TOLERANCE_RAD` of every
-frame (:func:`select_keyframes`): a robot at rest during a dwell needs two.
+interpolation needs to stay within :data:`~optlight.viz.keyframes.KEY_TOLERANCE_M` and
+:data:`~optlight.viz.keyframes.KEY_TOLERANCE_RAD` of every frame
+(:func:`~optlight.viz.keyframes.select_keyframes`): a robot at rest during a dwell needs two.
 """
 
 from __future__ import annotations
@@ -55,8 +56,6 @@ import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
 import trimesh
-import umsgpack
-from meshcat.servers.tree import SceneTree, find_node
 from meshcat.servers.zmqserver import VIEWER_ROOT
 from numpy.typing import ArrayLike, NDArray
 from pinocchio.visualize import MeshcatVisualizer
@@ -68,7 +67,15 @@ from optlight.geometry import LightSphere
 from optlight.scene.camera import Camera
 from optlight.scene.render import lambertian
 from optlight.spec import LightSpec
+from optlight.viz.keyframes import (
+    KEY_TOLERANCE_M,
+    KEY_TOLERANCE_RAD,
+    animation_times,
+    continuous_quaternions,
+    select_keyframes,
+)
 from optlight.viz.meshes import CompactMeshGeometry, decimate, display_mesh, float32_ext
+from optlight.viz.recording import HTML_TEMPLATE, SceneCommand, SceneRecorder
 from optlight.viz.server import MeshcatServer
 
 Array = NDArray[np.float64]
@@ -93,10 +100,6 @@ _LIGHT_COLOR = 0xFFC800
 #: kept whole: decimated to 30,000 (0.5 MB of the page instead of 1.8 MB) its shading, what the
 #: preview shows of the plan, came out streaked, the eyes and lips smeared.
 OBJECT_MESH_FACES = 120_000
-#: How far (m) and how much (rad) the viewer's interpolation between the kept keyframes may move a
-#: link or the light from its pose at any frame: well below a pixel at the preview's scale.
-KEY_TOLERANCE_M = 5e-4
-KEY_TOLERANCE_RAD = np.radians(0.1)
 
 
 class SceneLike(Protocol):
@@ -196,7 +199,7 @@ class Preview:
         #: last; empty without a trajectory.
         self.key_times = np.zeros(0)
 
-        self._recorder = _SceneRecorder()
+        self._recorder = SceneRecorder()
         vis = meshcat.Visualizer(window=self._recorder)
         robot_view = self._add_robot(vis) if show_robot else None
         self._add_object(vis)
@@ -216,7 +219,7 @@ class Preview:
         inlined; opens from disk without a server or network."""
         viewer_js = (Path(VIEWER_ROOT) / "main.min.js").read_text(encoding="utf-8")
         commands = [base64.b64encode(packed).decode("ascii") for _, _, packed in self._recorder.commands()]
-        return _HTML_TEMPLATE.format(
+        return HTML_TEMPLATE.format(
             title=html.escape(f"optlight preview: {self.robot.name}"),
             viewer_js=viewer_js,
             commands=json.dumps(commands),
@@ -428,7 +431,7 @@ class Preview:
 
         animations = [{"path": vis[node].path.lower(), "clip": clip(i)} for i, node in enumerate(nodes)]
         options = {"play": True, "repetitions": 1}
-        self._recorder.send(_Command({"type": "set_animation", "path": "", "animations": animations, "options": options}))
+        self._recorder.send(SceneCommand({"type": "set_animation", "path": "", "animations": animations, "options": options}))
 
 
 class _RobotView(MeshcatVisualizer):
@@ -495,14 +498,6 @@ def obstacle_display(obstacle: Obstacle, center: ArrayLike) -> tuple[mg.Geometry
     raise TypeError(f"no display for the obstacle {obstacle.name!r} ({type(obstacle).__name__})")
 
 
-def animation_times(duration: float, fps: float) -> Array:
-    """Frame times 0, 1/fps, 2/fps, … (s), with a last frame at ``duration`` when it falls between."""
-    times = np.arange(int(np.floor(duration * fps + 1e-9)) + 1) / fps
-    if duration - times[-1] > 1e-9:
-        times = np.append(times, duration)
-    return times
-
-
 def display_object(mesh: trimesh.Trimesh, values: ArrayLike, max_faces: int) -> tuple[trimesh.Trimesh, Array]:
     """The object's mesh for display with ``values`` (V,) given per vertex of ``mesh``: the mesh itself
     when it has at most ``max_faces`` triangles, else :func:`optlight.viz.meshes.decimate`'s, each
@@ -514,62 +509,6 @@ def display_object(mesh: trimesh.Trimesh, values: ArrayLike, max_faces: int) -> 
     vertices, faces = decimate(mesh.vertices, mesh.faces, max_faces)
     nearest = cKDTree(mesh.vertices).query(vertices)[1]
     return trimesh.Trimesh(vertices, faces, process=False), values[nearest]
-
-
-def continuous_quaternions(quaternions: ArrayLike) -> Array:
-    """Unit quaternions (T, N, 4), one sequence over T per node, with signs flipped where needed so
-    that consecutive ones have a non-negative dot product (q and −q are the same rotation)."""
-    q = np.array(quaternions, float)
-    for t in range(1, len(q)):
-        q[t] *= np.where(np.einsum("nk,nk->n", q[t], q[t - 1]) < 0.0, -1.0, 1.0)[:, None]
-    return q
-
-
-def slerp(q0: Array, q1: Array, s: Array) -> Array:
-    """Spherical interpolation between unit quaternions q0, q1 (N, 4) at fractions s (T,): (T, N, 4),
-    along the shorter arc (as three.js's ``Quaternion.slerpFlat``)."""
-    dot = np.einsum("nk,nk->n", q0, q1)
-    q1 = np.where(dot[:, None] < 0.0, -q1, q1)
-    angle = np.arccos(np.clip(np.abs(dot), -1.0, 1.0))
-    sin = np.sin(angle)
-    near = sin < 1e-9  # (almost) the same rotation: linear interpolation is exact to first order
-    safe = np.where(near, 1.0, sin)
-    w0 = np.where(near, 1.0 - s[:, None], np.sin((1.0 - s[:, None]) * angle) / safe)
-    w1 = np.where(near, s[:, None], np.sin(s[:, None] * angle) / safe)
-    out = w0[..., None] * q0 + w1[..., None] * q1
-    return out / np.linalg.norm(out, axis=-1, keepdims=True)
-
-
-def select_keyframes(
-    times: ArrayLike, positions: ArrayLike, quaternions: ArrayLike, tolerance_m: float, tolerance_rad: float
-) -> NDArray[np.int64]:
-    """Indices of the frames to keep as keyframes, first and last included: greedily, each keyframe
-    is followed by the furthest frame such that interpolating every node between the two (positions
-    linearly, quaternions by :func:`slerp`, as the viewer does) stays within ``tolerance_m`` (m) and
-    ``tolerance_rad`` (rad) of each frame between them.
-
-    ``times`` (T,) increasing, ``positions`` (T, N, 3), ``quaternions`` (T, N, 4) unit."""
-    t = np.asarray(times, float)
-    p = np.asarray(positions, float)
-    q = np.asarray(quaternions, float)
-    keys = [0]
-    start = 0
-    while start < len(t) - 1:
-        end = start + 1
-        while end + 1 < len(t) and _interpolates(t, p, q, start, end + 1, tolerance_m, tolerance_rad):
-            end += 1
-        keys.append(end)
-        start = end
-    return np.asarray(keys, np.int64)
-
-
-def _interpolates(t: Array, p: Array, q: Array, i: int, j: int, tolerance_m: float, tolerance_rad: float) -> bool:
-    """Whether keyframes at frames i and j alone reproduce every frame between them within tolerance."""
-    s = (t[i + 1 : j] - t[i]) / (t[j] - t[i])
-    position_error = np.linalg.norm(p[i] + s[:, None, None] * (p[j] - p[i]) - p[i + 1 : j], axis=-1)
-    dot = np.abs(np.einsum("tnk,tnk->tn", slerp(q[i], q[j], s), q[i + 1 : j]))
-    angle_error = 2.0 * np.arccos(np.clip(dot, -1.0, 1.0))
-    return bool(position_error.max() <= tolerance_m and angle_error.max() <= tolerance_rad)
 
 
 def vertex_shading(
@@ -604,83 +543,3 @@ def _rgb_int(rgba: Any) -> int:
     return (r << 16) | (g << 8) | b
 
 
-class _Command:
-    """A meshcat command given as its message (``lower()`` returns it), for what meshcat-python's
-    command classes cannot say: an animation whose tracks are typed arrays."""
-
-    def __init__(self, message: dict[str, Any]) -> None:
-        self.message = message
-
-    def lower(self) -> dict[str, Any]:
-        """The message, as meshcat's command classes give theirs."""
-        return self.message
-
-
-class _SceneRecorder:
-    """Stands in for meshcat's ``ViewerWindow``: keeps the commands sent to it in the scene tree
-    meshcat's server keeps (last transform wins, ``set_object`` clears a node's properties), and
-    gives them back in an order a viewer can replay (the animation last, after its targets)."""
-
-    def __init__(self) -> None:
-        self.tree = SceneTree()
-        self.animation: bytes | None = None
-
-    def send(self, command: Any) -> None:
-        """Record one meshcat command (``SetObject``, ``SetTransform``, ``SetProperty``,
-        ``SetAnimation`` or pinocchio's ``DaeMeshGeometry``)."""
-        data = command.lower()
-        packed = umsgpack.packb(data)
-        kind = data["type"]
-        node = find_node(self.tree, [p for p in data["path"].split("/") if p])
-        if kind == "set_object":
-            node.object = packed
-            node.properties = []
-        elif kind == "set_transform":
-            node.transform = packed
-        elif kind == "set_property":
-            node.properties.append(packed)
-        elif kind == "set_animation":
-            self.animation = packed
-        else:
-            raise ValueError(f"the preview does not record meshcat {kind!r} commands")
-
-    def commands(self) -> list[tuple[str, str, bytes]]:
-        """(type, path, packed command) for every recorded command, parents before children."""
-        out: list[tuple[str, str, bytes]] = []
-        stack: list[tuple[str, Any]] = [("", self.tree)]
-        while stack:
-            path, node = stack.pop()
-            if node.object is not None:
-                out.append(("set_object", path, node.object))
-            out.extend(("set_property", path, p) for p in node.properties)
-            if node.transform is not None:
-                out.append(("set_transform", path, node.transform))
-            stack.extend((f"{path}/{name}", child) for name, child in reversed(list(node.items())))
-        if self.animation is not None:
-            out.append(("set_animation", "", self.animation))
-        return out
-
-
-_HTML_TEMPLATE = """<!DOCTYPE html>
-<html>
-<head>
-<meta charset="utf-8">
-<title>{title}</title>
-<style>body {{ margin: 0; }} #meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}</style>
-</head>
-<body>
-<div id="meshcat-pane"></div>
-<script>{viewer_js}</script>
-<script type="application/json" id="optlight-scene">{commands}</script>
-<script>
-var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-for (const command of JSON.parse(document.getElementById("optlight-scene").textContent)) {{
-  const bytes = atob(command);
-  const buffer = new Uint8Array(bytes.length);
-  for (let i = 0; i < bytes.length; i++) buffer[i] = bytes.charCodeAt(i);
-  viewer.handle_command_bytearray(buffer);
-}}
-</script>
-</body>
-</html>
-"""

@@ -78,7 +78,7 @@ def test_the_loop_reduces_a_mismatched_measured_cost(mismatched: Acquisition) ->
 
 
 def test_a_replan_that_fails_verification_ends_the_loop_and_the_best_plan_stands(monkeypatch) -> None:
-    import optlight.acquisition as acquisition_module
+    import optlight.acquisition.loop as acquisition_module
 
     real = acquisition_module.solve
     plans = []

@@ -31,7 +31,7 @@ from PIL import Image
 
 from optlight.cli import main
 from optlight.export import MANIFEST, STAGING_PREFIX
-from optlight.robot.loading import example_robot_data_dir
+from optlight.robot.catalogue import example_robot_data_dir
 
 #: The default problem shrunk so a whole solve (and its export) takes a few seconds.
 SMALL = {"camera": {"width": 64, "height": 64}, "landmarks": {"count": 6}}

@@ -15,16 +15,10 @@ import pytest
 from optlight.errors import ProblemError, RobotError
 from optlight.geometry import LightSphere, sphere_frame
 from optlight.robot import SUPPORTED_ROBOTS, Robot, light_angles, light_residual, load_robot
+from optlight.robot.catalogue import ROBOTS, example_robot_data_dir
 from optlight.robot.kinematics import symbolic_frame_pose
-from optlight.robot.loading import (
-    ROBOTS,
-    JointCoordinates,
-    _unread_visual_meshes,
-    example_robot_data_dir,
-    find_package,
-    placement,
-    resolve_mesh,
-)
+from optlight.robot.loading import JointCoordinates, placement
+from optlight.robot.urdf import find_package, resolve_mesh, unread_visual_meshes
 from optlight.spec import RobotSpec, load_problem, problem_from_dict
 
 N_CONFIGS = 200
@@ -264,7 +258,7 @@ def test_visual_meshes_unread_of_a_user_urdf(tmp_path: Path) -> None:
     )
     full = pin.buildModelFromUrdf(str(tmp_path / "arm.urdf"))
     read = pin.buildGeomFromUrdf(full, str(tmp_path / "arm.urdf"), pin.GeometryType.VISUAL, package_dirs=[str(tmp_path)])
-    unread = _unread_visual_meshes(full, tmp_path / "arm.urdf")
+    unread = unread_visual_meshes(full, tmp_path / "arm.urdf")
     assert [g.name for g in read.geometryObjects] == ["upper_0", "upper_1", "tool_0"]
     _same_visuals(unread, read)
     assert unread.geometryObjects[0].meshScale.tolist() == [2.0, 3.0, 4.0]
@@ -405,7 +399,7 @@ def test_published_limits_and_problem_overrides() -> None:
     with pytest.raises(RobotError, match=r"robot.jerk_limit: 2 values for the 7 joints"):
         load_robot(problem_from_dict(data))
     # a robot without a published jerk: the acceleration limit reached in DEFAULT_JERK_RAMP_S
-    from optlight.robot.loading import DEFAULT_JERK_RAMP_S
+    from optlight.robot.catalogue import DEFAULT_JERK_RAMP_S
 
     z1 = robot("z1")
     np.testing.assert_allclose(z1.jerk_limit, z1.acceleration_limit / DEFAULT_JERK_RAMP_S)

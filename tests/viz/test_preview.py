@@ -24,15 +24,8 @@ from optlight.planning.timing import time_parameterize
 from optlight.robot import load_robot
 from optlight.scene import Scene
 from optlight.spec import LightSpec, load_problem, problem_from_dict
-from optlight.viz.preview import (
-    KEY_TOLERANCE_M,
-    KEY_TOLERANCE_RAD,
-    Preview,
-    animation_times,
-    camera_corners,
-    select_keyframes,
-    vertex_shading,
-)
+from optlight.viz.keyframes import KEY_TOLERANCE_M, KEY_TOLERANCE_RAD, animation_times, select_keyframes
+from optlight.viz.preview import Preview, camera_corners, vertex_shading
 from optlight.viz.server import MeshcatServer
 
 M = 6
