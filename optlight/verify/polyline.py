@@ -22,8 +22,8 @@ def distance_to_polyline(points: ArrayLike, polyline: ArrayLike) -> Array:
 
     Only the segments that can be nearest are measured: the nearest vertex, at r₀, bounds the
     distance, and a segment with a point within r₀ of p has its start within r₀ + max_i |d_i| of p
-    (a k-d tree finds those). Exact, and O(P log K) for the even knots of a plan instead of O(P K)
-    (576 captures: 30 s of the verification). The long segments (a transfer's) are first cut into
+    (a k-d tree finds those). Exact, and O(P log K) for the even knots of a plan instead of O(P K),
+    which dominates the verification of a plan of hundreds of captures. The long segments (a transfer's) are first cut into
     pieces (:func:`_even_segments`), so that max_i |d_i| does not widen every point's search."""
     points = np.asarray(points, float).reshape(-1, 3)
     v = np.asarray(polyline, float).reshape(-1, 3)
