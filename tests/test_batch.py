@@ -17,10 +17,11 @@ import pytest
 from conftest import reduced_problem
 
 import optlight
-from optlight import batch
-from optlight.batch import BatchSpec, batch_spec_from_dict, dask_client, load_batch_spec, run_batch
+from optlight import batch, engine
+from optlight.batch import BatchSpec, batch_spec_from_dict, load_batch_spec, run_batch
 from optlight.cell import problem_toml
 from optlight.cli import main
+from optlight.engine import dask_client
 from optlight.errors import ProblemError
 from optlight.export import MANIFEST
 
@@ -175,7 +176,7 @@ def test_an_unreachable_scheduler_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     spec = write_spec(tmp_path)
-    monkeypatch.setattr(batch, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT_S", 1.0)
     before = _children()
     code = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:1"])
     err = capsys.readouterr().err
@@ -283,7 +284,7 @@ def test_a_finished_batch_starts_no_cluster(cluster_run: dict, monkeypatch: pyte
     def refuse(*args: object, **kwargs: object) -> None:
         raise AssertionError("a cluster was started")
 
-    monkeypatch.setattr(batch, "dask_client", refuse)
+    monkeypatch.setattr(engine, "dask_client", refuse)
     again = run_batch(finished, cluster_run["out"], progress=False)
     assert again.skipped == again.ok == FAILS
 
