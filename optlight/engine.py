@@ -8,8 +8,8 @@ metrics endpoint on a free loopback port); a remote cluster is just ``Client("tc
 its scheduler and workers started with ``dask scheduler`` / ``dask worker`` or by any cluster
 manager (SLURM, Kubernetes). Ray brings its own runtime (a GCS server, raylets, an object store in
 shared memory, a dashboard) with its own processes and ports, heavier than a batch of independent
-solves needs; its strengths (actors, GPUs, shared objects) are of no use here. One task per plan costs Dask about 1 ms of overhead (its documentation),
-against seconds per plan.
+solves needs; its strengths (actors, GPUs, shared objects) are of no use here. One task per plan
+costs Dask about 1 ms of overhead (its documentation), against seconds per plan.
 
 Processes: a local cluster (one single-threaded worker process per core unless ``workers`` says) is
 started for the run and closed, with its client, in ``finally`` blocks, also when a signal stops the
