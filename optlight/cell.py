@@ -65,7 +65,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from optlight.batch import apply_overrides, base_problem, check_keys, solve_row
+from optlight.batch.row import solve_row
+from optlight.batch.spec import apply_overrides, base_problem, check_keys
 from optlight.engine import engine, error_text, progress_bar, run_tasks
 from optlight.environment.view import HOUSING, view_check_for
 from optlight.errors import ProblemError
@@ -439,8 +440,8 @@ def design_cell(
     overwrite: bool = False,
 ) -> CellResult:
     """Search the placements of a cell spec (a :class:`CellSpec` or a file) and write the results into
-    ``out`` (module docstring). The engine (:mod:`optlight.engine`) as :func:`optlight.batch.run_batch`: a local cluster of
-    ``workers`` processes, the remote ``scheduler``, the caller's ``client``, or here when ``serial``.
+    ``out`` (module docstring). The engine (:mod:`optlight.engine`) as :func:`optlight.batch.run_batch`:
+    a local cluster of ``workers`` processes, the remote ``scheduler``, the caller's ``client``, or here when ``serial``.
     ``out`` follows the output policy of :mod:`optlight.export`, checked before any work: a new or
     empty folder, or with ``overwrite`` an earlier optlight output (only its own files replaced)."""
     out = Path(out)

@@ -17,8 +17,9 @@ import pytest
 from conftest import reduced_problem
 
 import optlight
-from optlight import batch, engine
+from optlight import engine
 from optlight.batch import BatchSpec, batch_spec_from_dict, load_batch_spec, run_batch
+from optlight.batch import run as batch_run
 from optlight.cell import problem_toml
 from optlight.cli import main
 from optlight.engine import dask_client
@@ -255,13 +256,13 @@ def test_a_resumed_batch_solves_only_what_is_not_done(
     (out / done[0].folder / "plan.json").unlink()  # an incomplete folder is not done
     (out / done[0].folder / "notes.md").write_text("mine")  # and a file the user put there stays
     solved: list[tuple[float, ...]] = []
-    real = batch.solve_row
+    real = batch_run.solve_row
 
     def counted(problem: optlight.Problem, preview: bool = False, folder: str | None = None) -> dict:
         solved.append(problem.robot.base_position_m)
         return real(problem, preview, folder)
 
-    monkeypatch.setattr(batch, "solve_row", counted)
+    monkeypatch.setattr(batch_run, "solve_row", counted)
     spec = load_batch_spec(out.parent / "batch.toml")
     again = run_batch(spec, out, serial=True, progress=False)
     assert sorted(solved) == sorted(
