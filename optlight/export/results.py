@@ -15,10 +15,7 @@ from numpy.typing import ArrayLike
 
 from optlight import interrupts
 from optlight.errors import VerificationError
-from optlight.export.files import (
-    lp_direction,
-    lp_text,
-)
+from optlight.export.files import Array, lp_direction, lp_text
 from optlight.export.policy import write_folder
 from optlight.jsondata import json_safe
 from optlight.motion import Trajectory
@@ -80,6 +77,42 @@ def write_results(
         ValueError, TypeError: bad inputs, data JSON cannot hold; raised before anything is written.
     """
     folder = Path(folder)
+    directions, names = _checked_inputs(
+        folder, trajectory, report, plan_dict, light_directions_camera, image_pattern, figures
+    )
+
+    def plan_text(files: list[str]) -> str:
+        return json.dumps({**plan, "files": files}, indent=2, allow_nan=False) + "\n"
+
+    plan = _plan_record(trajectory, report, plan_dict, joint_names, csv_rate_hz)
+    plan_text([])  # fails here, before anything is written, when plan_dict holds non-JSON data
+
+    def write(staging: Path) -> list[Path]:
+        files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
+        trajectory.to_csv(staging / "trajectory.csv", joint_names, rate_hz=csv_rate_hz)
+        (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
+        for writer in writers:
+            files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
+        interrupts.reached("figures")
+        for name, png in (figures or {}).items():
+            (staging / f"{name}.png").write_bytes(png())
+        (staging / "plan.json").write_text(plan_text(files))
+        return [staging / f for f in files]
+
+    return write_folder(folder, write, overwrite=overwrite)
+
+
+def _checked_inputs(
+    folder: Path,
+    trajectory: Trajectory,
+    report: VerificationReport,
+    plan_dict: Mapping[str, Any],
+    light_directions_camera: ArrayLike,
+    image_pattern: str,
+    figures: Mapping[str, Callable[[], bytes]] | None,
+) -> tuple[Array, list[str]]:
+    """:func:`write_results`'s checks, before anything is written: the (M, 3) unit light directions
+    and the M image names, M the trajectory's captures; raises as :func:`write_results` says."""
     if not report.passed:
         raise VerificationError(
             f"refusing to write {folder}: the plan failed verification\n{report.summary()}", report
@@ -102,17 +135,25 @@ def write_results(
     for name in figures or {}:
         if not name or Path(name).name != name or name.startswith("."):
             raise ValueError(f"figure name {name!r} must be a plain file stem")
+    return directions, names
 
-    def plan_text(files: list[str]) -> str:
-        return json.dumps({**plan, "files": files}, indent=2, allow_nan=False) + "\n"
 
-    plan = {
+def _plan_record(
+    trajectory: Trajectory,
+    report: VerificationReport,
+    plan_dict: Mapping[str, Any],
+    joint_names: Sequence[str],
+    csv_rate_hz: float,
+) -> dict[str, Any]:
+    """plan.json without its ``files``: ``plan_dict`` plus the verification report, the trajectory's
+    timing, the library versions and the creation time."""
+    return {
         **json_safe(dict(plan_dict)),
         "verification": report.to_dict(),
         "timing": json_safe(
             {
                 "duration_s": trajectory.duration,
-                "capture_times_s": captures,
+                "capture_times_s": trajectory.capture_times,
                 "landmark_intervals_s": trajectory.landmark_intervals,
                 "segment_times_s": trajectory.segment_times,
                 "joint_names": list(joint_names),
@@ -122,18 +163,3 @@ def write_results(
         "versions": library_versions(),
         "created_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
-    plan_text([])  # fails here, before anything is written, when plan_dict holds non-JSON data
-
-    def write(staging: Path) -> list[Path]:
-        files = ["trajectory.csv", "plan.json", "lights.lp", *(f"{n}.png" for n in figures or {})]
-        trajectory.to_csv(staging / "trajectory.csv", joint_names, rate_hz=csv_rate_hz)
-        (staging / "lights.lp").write_text(lp_text(names, lp_direction(directions)))
-        for writer in writers:
-            files += [str(Path(p).relative_to(staging)) for p in writer(staging)]
-        interrupts.reached("figures")
-        for name, png in (figures or {}).items():
-            (staging / f"{name}.png").write_bytes(png())
-        (staging / "plan.json").write_text(plan_text(files))
-        return [staging / f for f in files]
-
-    return write_folder(folder, write, overwrite=overwrite)
