@@ -36,8 +36,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from optlight.batch import dask_client, run_batch, solve_row
+from optlight.batch import run_batch, solve_row
 from optlight.cell import design_cell, evaluate_placement, load_cell_spec, problem_toml
+from optlight.engine import dask_client
 from optlight.spec import load_problem, problem_from_dict
 
 if TYPE_CHECKING:

@@ -17,10 +17,12 @@ import pytest
 from conftest import reduced_problem
 
 import optlight
-from optlight import batch
-from optlight.batch import BatchSpec, batch_spec_from_dict, dask_client, load_batch_spec, run_batch
+from optlight import engine
+from optlight.batch import BatchSpec, batch_spec_from_dict, load_batch_spec, run_batch
+from optlight.batch import run as batch_run
 from optlight.cell import problem_toml
 from optlight.cli import main
+from optlight.engine import dask_client
 from optlight.errors import ProblemError
 from optlight.export import MANIFEST
 
@@ -175,7 +177,7 @@ def test_an_unreachable_scheduler_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     spec = write_spec(tmp_path)
-    monkeypatch.setattr(batch, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT_S", 1.0)
     before = _children()
     code = main(["batch", str(spec), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:1"])
     err = capsys.readouterr().err
@@ -254,13 +256,13 @@ def test_a_resumed_batch_solves_only_what_is_not_done(
     (out / done[0].folder / "plan.json").unlink()  # an incomplete folder is not done
     (out / done[0].folder / "notes.md").write_text("mine")  # and a file the user put there stays
     solved: list[tuple[float, ...]] = []
-    real = batch.solve_row
+    real = batch_run.solve_row
 
     def counted(problem: optlight.Problem, preview: bool = False, folder: str | None = None) -> dict:
         solved.append(problem.robot.base_position_m)
         return real(problem, preview, folder)
 
-    monkeypatch.setattr(batch, "solve_row", counted)
+    monkeypatch.setattr(batch_run, "solve_row", counted)
     spec = load_batch_spec(out.parent / "batch.toml")
     again = run_batch(spec, out, serial=True, progress=False)
     assert sorted(solved) == sorted(
@@ -283,7 +285,7 @@ def test_a_finished_batch_starts_no_cluster(cluster_run: dict, monkeypatch: pyte
     def refuse(*args: object, **kwargs: object) -> None:
         raise AssertionError("a cluster was started")
 
-    monkeypatch.setattr(batch, "dask_client", refuse)
+    monkeypatch.setattr(engine, "dask_client", refuse)
     again = run_batch(finished, cluster_run["out"], progress=False)
     assert again.skipped == again.ok == FAILS
 

@@ -13,18 +13,17 @@ import pytest
 from optlight.errors import OutputError, UsageError, VerificationError
 from optlight.export import (
     MANIFEST,
-    _yaml_float,
-    _yaml_rows,
     check_output_folder,
     joint_trajectory_text,
-    json_safe,
     lp_direction,
     lp_text,
     write_file,
     write_folder,
     write_results,
 )
+from optlight.export.files import _yaml_float, _yaml_rows
 from optlight.geometry import LightSphere, aim_rotation, sphere_frame
+from optlight.jsondata import json_safe
 from optlight.motion import Trajectory
 from optlight.planning.timing import time_parameterize
 from optlight.planning.waypoints import controller_waypoints

@@ -34,7 +34,7 @@ LAYERS: list[set[str]] = [
     {"planning"},
     {"verify"},
     {"stages"},
-    {"export"},
+    {"export", "engine"},
     {"datasets"},
     {"viz"},
     {"report"},

@@ -343,7 +343,7 @@ def pattern_of(pattern: str, files: dict[str, str]) -> re.Pattern[str]:
 WORK = {
     "optlight.pipeline": "solve",
     "optlight.acquisition": "acquire",
-    "optlight.batch": "run_tasks",
+    "optlight.batch.run": "run_tasks",
     "optlight.planning.reach": "reachability_map",
 }
 

@@ -406,7 +406,7 @@ def test_a_batch_removes_the_staging_folders_its_stopped_workers_left(tmp_path: 
     """A worker stopped as it saved a plan leaves its staging folder: beside the plan's folder (in
     plans/, or in the batch folder before plans/ existed) or in the plan's folder. Leaving the batch's
     engine removes them, and nothing else; with a remote cluster (whose workers go on) none."""
-    from optlight.batch import no_staging_left
+    from optlight.batch.run import no_staging_left
 
     kept = [tmp_path / "records" / "a.json", tmp_path / "plans" / "a" / "plan.json", tmp_path / "results.csv"]
     for path in kept:
