@@ -31,6 +31,10 @@ TORQUE_MARGIN = 0.95
 RATE_HZ = 250.0
 #: Rounds of re-timing before the motion is left to the verification.
 ROUNDS = 4
+#: Smallest limit scale: a motion at most 1/√0.1 ≈ 3.2× slower. A motion that needs more (a jump
+#: between IK branches, a lamp the arm can barely hold) is left to the verification, which names
+#: the joint, instead of being stretched without bound.
+MIN_SCALE = 0.1
 
 
 def torque_scale(dynamics: Dynamics, trajectory: Trajectory) -> float:
@@ -57,12 +61,13 @@ def torque_scale(dynamics: Dynamics, trajectory: Trajectory) -> float:
 
 def within_torque_limits(timed: Callable[[float], Trajectory], dynamics: Dynamics) -> Trajectory:
     """``timed(s)`` — the motion timed with its limits scaled by s (module docstring) — at the largest
-    scale (1, or the few rounds' estimate) whose torques stay within the limits."""
+    scale (1, or the few rounds' estimate, not below :data:`MIN_SCALE`) whose torques stay within
+    the limits."""
     scale = 1.0
     trajectory = timed(scale)
     for _ in range(ROUNDS):
         step = torque_scale(dynamics, trajectory)
-        if step >= 1.0 or step <= 0.0:
+        if step >= 1.0 or scale * step < MIN_SCALE:
             break
         scale *= step
         trajectory = timed(scale)

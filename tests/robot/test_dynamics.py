@@ -155,3 +155,27 @@ def test_a_motion_too_fast_for_the_torques_is_slowed_within_the_limits() -> None
     slowed = within_torque_limits(timed, dynamics)
     assert peak_ratio(slowed) <= 1.0
     assert slowed.duration > fast.duration
+
+
+def test_a_motion_the_torques_cannot_allow_is_not_stretched_without_bound() -> None:
+    """Where only a motion many times slower would keep the torques within the limits, the timing
+    stops at its smallest scale and leaves the motion to the verification (which refuses it)."""
+    from optlight.planning.torque_scaling import MIN_SCALE, within_torque_limits
+
+    class Heavy:  # half the limit at rest, and a thousand times its limit per rad/s² of motion
+        torque_limit = np.ones(2)
+
+        def torques(self, q, qd, qdd):
+            return 0.5 + 1e3 * np.abs(np.asarray(qdd))
+
+    scales: list[float] = []
+
+    def timed(scale: float) -> optlight.Trajectory:
+        scales.append(scale)
+        from optlight.planning.jerk import jerk_limited_timing
+
+        path = np.array([[0.0, 0.0], [1.0, 1.0]])
+        return jerk_limited_timing([path], np.sqrt(scale) * np.ones(2), scale * np.ones(2), scale**1.5 * np.ones(2), 0.0)
+
+    within_torque_limits(timed, Heavy())  # type: ignore[arg-type]
+    assert min(scales) >= MIN_SCALE
