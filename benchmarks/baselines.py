@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from optlight.errors import OptlightError
 from optlight.geometry import LightSphere
 from optlight.objectives import Objective
 from optlight.planning.landmarks import CostGrid, Progress, sweep_costs, zenith_grid
@@ -88,6 +89,7 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     from optlight.planning.policy import knot_ik, visiting_order
     from optlight.planning.set_landmarks import tour_order
     from optlight.setup import Setup
+    from optlight.spec.sizing import check_trajectory_samples
 
     start = time.perf_counter()
     setup = Setup.from_problem(problem)
@@ -105,12 +107,17 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
         )
         for theta in knots
     )
-    report = verify_knots(setup, trajectory, positions, knots, path.transfers)
+    dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
+    try:  # a plan the pipeline would refuse before sampling it (hours long) is not verified
+        check_trajectory_samples(problem, setup.robot.n, trajectory.duration, dwell)
+        passed = verify_knots(setup, trajectory, positions, knots, path.transfers).passed
+    except OptlightError:
+        passed = False
     intervals = trajectory.landmark_intervals
     return {
         "time_s": elapsed,
         "joint_path_length": joint_path_length(knots),
         "motion_time": float(trajectory.duration - np.sum(intervals[:, 1] - intervals[:, 0])),
         "max_h_residual": h,
-        "verification_passed": report.passed,
+        "verification_passed": passed,
     }

@@ -29,6 +29,9 @@ Array = NDArray[np.float64]
 TORQUE_MARGIN = 0.95
 #: Sampling rate (Hz) of the torque estimate: the profiles are smooth at this scale.
 RATE_HZ = 250.0
+#: Most samples of the estimate: a motion hours long (which the sample-size check refuses after the
+#: timing) is estimated more coarsely instead of filling the memory.
+MAX_SAMPLES = 200_000
 #: Rounds of re-timing before the motion is left to the verification.
 ROUNDS = 4
 #: Smallest limit scale: a motion at most 1/√0.1 ≈ 3.2× slower. A motion that needs more (a jump
@@ -44,7 +47,7 @@ def torque_scale(dynamics: Dynamics, trajectory: Trajectory) -> float:
     limit = dynamics.torque_limit
     if limit is None:
         return 1.0
-    q, qd, qdd = trajectory.sample(trajectory.sample_times(RATE_HZ))
+    q, qd, qdd = trajectory.sample(trajectory.sample_times(min(RATE_HZ, MAX_SAMPLES / trajectory.duration)))
     tau = np.abs(dynamics.torques(q, qd, qdd))
     over = tau > TORQUE_MARGIN * limit
     if not over.any():
