@@ -7,8 +7,10 @@ its own variant at import time; fixtures give the common ones, built once per se
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -62,3 +64,18 @@ def small_default() -> Problem:
 def small_setup(small_default: Problem) -> Setup:
     """:func:`small_default` built once."""
     return Setup.from_problem(small_default)
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every entry below ``root`` (hidden ones too): a file's SHA-256, a link's target, "dir"; what
+    the tests compare to show that a run changed nothing of the user's."""
+    out = {}
+    for path in sorted(root.rglob("*")):
+        rel = str(path.relative_to(root))
+        if path.is_symlink():
+            out[rel] = "link:" + os.readlink(path)
+        elif path.is_dir():
+            out[rel] = "dir"
+        else:
+            out[rel] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return out

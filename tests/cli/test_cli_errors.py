@@ -11,7 +11,6 @@ latch in-process (signals sent to real commands at named stages: test_signals.py
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import json
 import os
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import snapshot
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
@@ -208,21 +208,6 @@ def write_bad_problems(root: Path) -> dict[str, str]:
     files["broken"] = str(p / "broken.toml")
     return files
 
-
-def snapshot(root: Path) -> dict[str, str]:
-    """Every entry below ``root`` (hidden ones too): a file's SHA-256, a link's target, "dir"."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in dirnames + filenames:
-            path = Path(dirpath) / name
-            rel = str(path.relative_to(root))
-            if path.is_symlink():
-                out[rel] = "link:" + os.readlink(path)
-            elif path.is_dir():
-                out[rel] = "dir"
-            else:
-                out[rel] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return out
 
 
 def staging_left(root: Path) -> list[str]:

@@ -13,7 +13,6 @@ bound the sizing check rests on, against real timed trajectories.
 
 from __future__ import annotations
 
-import hashlib
 import importlib
 import json
 import math
@@ -24,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import reduced_problem, snapshot
 from PIL import Image
 
 import optlight
@@ -313,14 +312,6 @@ def make_workspace(root: Path) -> dict[str, str]:
     files["million"] = str(spec)
     return files
 
-
-def snapshot(root: Path) -> dict[str, str]:
-    """Every file and folder under ``root`` with a digest of its bytes."""
-    out = {}
-    for path in sorted(root.rglob("*")):
-        rel = str(path.relative_to(root))
-        out[rel] = "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,6 @@ each. Last, the figure worker ends with its parent when the parent is killed (SI
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -31,6 +30,7 @@ from pathlib import Path
 
 import psutil
 import pytest
+from conftest import snapshot
 
 from optlight import interrupts
 from optlight.export import MANIFEST, STAGING_PREFIX
@@ -95,19 +95,6 @@ class Outcome:
     after: dict[str, str]
     folder: Path
 
-
-def snapshot(root: Path) -> dict[str, str]:
-    """Every entry below ``root`` (hidden ones too): a file's SHA-256, a link's target, "dir"."""
-    out = {}
-    for path in sorted(root.rglob("*")):
-        rel = str(path.relative_to(root))
-        if path.is_symlink():
-            out[rel] = "link:" + os.readlink(path)
-        elif path.is_dir():
-            out[rel] = "dir"
-        else:
-            out[rel] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return out
 
 
 def marked(mark: str) -> list[str]:
