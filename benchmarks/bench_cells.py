@@ -16,7 +16,7 @@ one cell cannot stall the run. Each cell ends as one of:
 Reported: the counts overall and per robot, object, task and environment; solve times (median,
 p98) of the verified cells; every refused, failed and crashed cell with its seed and message.
 
-    python benchmarks/bench_cells.py [--cells 100] [--timeout 900] [--seed0 0] [--out FILE]
+    python benchmarks/bench_cells.py [--cells 100] [--timeout 900] [--seed0 0] [--jobs N] [--out FILE]
     optlight bench cells [--quick] --out benchmarks/results/cells     (--quick: 12 cells)
 """
 
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -31,6 +32,7 @@ import tempfile
 import time
 import traceback
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -155,13 +157,15 @@ def summarize(cells: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def run(cells: int = 100, seed0: int = 0, timeout_s: float = 900.0) -> dict[str, Any]:
-    """Cells ``seed0`` … ``seed0 + cells − 1``, one process each; the summary (:func:`summarize`)
-    with the outcome of every cell under ``cells``."""
-    done = []
-    with tempfile.TemporaryDirectory(prefix="optlight_cells_") as folder:
-        for seed in range(seed0, seed0 + cells):
-            done.append(run_cell(seed, folder, timeout_s))
+def run(cells: int = 100, seed0: int = 0, timeout_s: float = 900.0, jobs: int | None = None) -> dict[str, Any]:
+    """Cells ``seed0`` … ``seed0 + cells − 1``, one process each, ``jobs`` at a time (default: one per
+    core); the summary (:func:`summarize`) with the outcome of every cell under ``cells``."""
+    jobs = jobs or os.cpu_count() or 1
+    with tempfile.TemporaryDirectory(prefix="optlight_cells_") as folder, ThreadPoolExecutor(jobs) as pool:
+        futures = [pool.submit(run_cell, seed, folder, timeout_s) for seed in range(seed0, seed0 + cells)]
+        done = []
+        for future in futures:
+            done.append(future.result())
             print(json.dumps({k: done[-1].get(k) for k in ("seed", "name", "outcome", "reason", "time_s")}),
                   file=sys.stderr, flush=True)
     out = summarize(done)
@@ -175,6 +179,7 @@ def main() -> None:
     parser.add_argument("--cells", type=int, default=100)
     parser.add_argument("--seed0", type=int, default=0)
     parser.add_argument("--timeout", type=float, default=900.0)
+    parser.add_argument("--jobs", type=int, help="cells solved at a time (default: one per core)")
     parser.add_argument("--one", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--folder", help=argparse.SUPPRESS)
     parser.add_argument("--out", help="write the result as JSON here")
@@ -182,7 +187,7 @@ def main() -> None:
     if args.one is not None:
         print(json.dumps(solve_one(args.one, args.folder or tempfile.gettempdir()), default=str))
         return
-    result = run(args.cells, args.seed0, args.timeout)
+    result = run(args.cells, args.seed0, args.timeout, args.jobs)
     text = json.dumps(result, indent=1, default=str)
     if args.out:
         Path(args.out).write_text(text + "\n")
