@@ -138,8 +138,9 @@ def place_landmarks(
     :class:`AzimuthPlacement`: the best light the robot reaches clear on the landmark's azimuth) puts
     another light in its place, with a warning that says how far it moved and why.
 
-    Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons),
-    unless ``[landmarks] allow_partial``, which drops it with a warning.
+    Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons)
+    and where the base would reach the cap (:func:`~optlight.planning.reach.base_hint`), unless
+    ``[landmarks] allow_partial``, which drops it with a warning.
     """
     chain = PlacementChain(setup, reacher, replacement=replacement)
     for lm in landmarks:
@@ -193,8 +194,11 @@ class PlacementChain:
             f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; {found}"
         )
         if not setup.landmark_spec.allow_partial:
+            from optlight.planning.reach import base_hint  # reach builds on this module's Reacher
+
             raise UnreachableError(
-                f"{where}; move the robot base ([robot] base_position_m) or set [landmarks] allow_partial = true"
+                f"{where}; set [landmarks] allow_partial = true to plan the landmarks it reaches, or "
+                f"{base_hint(setup)}"
             )
         self.notes.append(f"dropped {where}")
 
@@ -206,7 +210,9 @@ class PlacementChain:
     def finish(self) -> LandmarkPlacement:
         """The placement of the landmarks added; raises :class:`UnreachableError` when none is kept."""
         if not self.kept:
-            raise UnreachableError(f"no landmark is reachable by {self.setup.robot.name}")
+            from optlight.planning.reach import base_hint  # reach builds on this module's Reacher
+
+            raise UnreachableError(f"no landmark is reachable by {self.setup.robot.name}; {base_hint(self.setup)}")
         thetas = _follow_back(self.reacher, self.kept, np.array(self.thetas))
         return LandmarkPlacement(tuple(self.kept), thetas, tuple(self.notes))
 

@@ -54,7 +54,7 @@ from optlight.planning.lightsets import (
 )
 from optlight.planning.path import azimuth_order, shortest_open_tour
 from optlight.planning.policy import Attempt, Reacher, too_close_mm, why_moved
-from optlight.planning.reach import ClearField, ReachabilityMap, reachability_map
+from optlight.planning.reach import ClearField, ReachabilityMap, base_hint, reachability_map
 from optlight.setup import Setup
 
 Array = NDArray[np.float64]
@@ -106,7 +106,7 @@ def landmarks_of_set(
             raise UnreachableError(
                 f"{setup.robot.name} reaches no light of the cap clear of the environment and the camera's "
                 f"view (reachability map, {reach.success.size} cells, {100 * reach.reachable_fraction:.0f} % "
-                "reached by the IK); move the robot base ([robot] base_position_m) or widen [light_sphere]"
+                f"reached by the IK); {base_hint(setup)}"
             )
         field = ClearField.from_map(reach)
     if spec.kind == "grid":

@@ -149,6 +149,38 @@ def test_ur5_cap_is_clear_where_coal_says_so(tmp_path) -> None:
     assert report.passed, report.summary()
 
 
+@pytest.mark.slow
+def test_a_cell_the_arm_cannot_reach_names_a_base_that_reaches_it(tmp_path) -> None:
+    """A Z1 cell (random cell 4, every landmark asked for) whose cap the arm reaches clear almost
+    nowhere (its wrist cannot turn the lamp far enough sideways): the refusal names a base position,
+    and there, the generalized IK from random starts and coal's exact check (not the map the
+    suggestion was made with) find clear lights."""
+    from optlight.planning.landmarks import find_landmarks
+    from optlight.planning.policy import place_landmarks
+    from optlight.robot import generalized_ik
+
+    cell = random_cell(4, tmp_path)
+    asked = {**cell.data, "landmarks": {**cell.data["landmarks"], "allow_partial": False}}
+    setup = Setup.from_problem(problem_from_dict(asked))
+    with pytest.raises(optlight.UnreachableError, match=r"move the robot base: \[robot\] base_position_m = \[") as e:
+        place_landmarks(setup, find_landmarks(setup).landmarks)
+    named = re.search(r"base_position_m = (\[[^\]]*\]) reaches (\d+) of", str(e.value))
+    assert named is not None and int(named.group(2)) >= 1
+    data = {**asked, "robot": {**cell.data["robot"], "base_position_m": eval(named.group(1))}}
+    moved = Setup.from_problem(problem_from_dict(data))
+    assert moved.environment is not None
+    sphere, robot, rng = moved.sphere, moved.robot, np.random.default_rng(3)
+    clear = 0
+    for zenith in np.radians(np.arange(np.degrees(sphere.zenith_min), np.degrees(sphere.zenith_max) + 1e-9, 10.0)):
+        for azimuth in np.radians(np.arange(0.0, 360.0, 20.0)):
+            for start in [robot.theta_ref, *robot.random_configuration(rng, 8)]:
+                ik = generalized_ik(robot, sphere, sphere.position(zenith, azimuth), start, restarts=False, **moved.ik)
+                if ik.success and moved.environment.check(robot, ik.theta[None], [0.0], capture_times=[0.0]).passed:
+                    clear += 1
+                    break
+    assert clear >= 1
+
+
 def _ur5_cell(**robot) -> dict:
     """A UR5 with a face 0.5 m in front of its base at the height of its reference tool position, the
     camera to its left, a table at the base: the reference configuration reaches into the face."""

@@ -242,5 +242,8 @@ def test_a_set_the_robot_reaches_nowhere_is_refused_after_the_map() -> None:
         robot={"base_position_m": [3.0, 0.0, 0.0]},
         lightset={"count": 4, "starts": 1, "reach_step_deg": 20.0},
     )
-    with pytest.raises(UnreachableError, match=r"reaches no light of the cap clear .*reachability map, 27 cells, 0 %"):
+    with pytest.raises(UnreachableError, match=r"reaches no light of the cap clear .*reachability map, 27 cells, 0 %") as e:
         choose_captures(Setup.from_problem(problem))
+    # no base near this one reaches the cap either: the refusal says what else to change
+    assert "no robot base within 0.3 m of [robot] base_position_m" in str(e.value)
+    assert "[camera] position_m" in str(e.value)
