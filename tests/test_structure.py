@@ -21,7 +21,8 @@ PACKAGE = ROOT / "optlight"
 
 #: The layers, lowest first: a module may import from its own layer's package and from lower layers.
 #: Where the light goes (objectives, landmarks) and how the robot gets there (policy, path,
-#: trajectory NLP, timing) both live in planning, above the built setup and below verification.
+#: trajectory NLP, timing) both live in planning, above the built setup and below verification; they
+#: take the work cell (optlight.workcell), below the setup that builds it.
 LAYERS: list[set[str]] = [
     {"errors", "jsondata", "interrupts", "cache", "threads"},
     {"locks"},
@@ -29,6 +30,7 @@ LAYERS: list[set[str]] = [
     {"geometry", "motion"},
     {"scene", "robot"},
     {"objectives", "environment", "photometric_stereo", "random_cells"},
+    {"workcell"},
     {"setup"},
     {"capture"},
     {"planning"},
