@@ -369,7 +369,8 @@ def test_azimuth_out_of_reach_is_named_or_dropped(monkeypatch: pytest.MonkeyPatc
         light_sphere={"zenith_min_deg": 20.0},
         landmarks={"allow_partial": True},
     )
-    placed = place_landmarks(Setup.from_problem(partial), landmarks)
+    dropping = Setup.from_problem(partial)
+    placed = place_landmarks(reacher_of(dropping), dropping.landmark_spec, landmarks)
     kept, thetas, notes = placed.landmarks, placed.thetas, placed.warnings
     assert [lm.index for lm in kept] == [3] and thetas.shape == (1, case.robot.n)
     assert [note.split(" (")[0] for note in notes] == [

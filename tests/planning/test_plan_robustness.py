@@ -210,9 +210,9 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
     real_path, real_knots = pipeline.capture_path, pipeline.optimize_knots
     paths: list[int] = []  # captures of each path the pipeline plans
 
-    def counted_path(setup, positions, thetas):  # type: ignore[no-untyped-def]
+    def counted_path(sphere, spec, positions, thetas):  # type: ignore[no-untyped-def]
         paths.append(len(positions))
-        return real_path(setup, positions, thetas)
+        return real_path(sphere, spec, positions, thetas)
 
     def fails_with_every_capture(cell, spec, solver, path, warm, fixed_start, **kwargs):  # type: ignore[no-untyped-def]
         if len(paths) == 1:  # the first path, through every placed capture
