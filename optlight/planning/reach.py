@@ -44,7 +44,6 @@ from optlight.geometry import direction_in_sphere_frame
 from optlight.planning.lightsets import angles_of
 from optlight.planning.policy import Reacher
 from optlight.robot import KinematicState, manipulability
-from optlight.setup import Setup
 
 if TYPE_CHECKING:  # imported where the figure is made: see optlight.viz.layout
     from matplotlib.figure import Figure
@@ -252,24 +251,23 @@ class ClearField:
 
 
 def reachability_map(
-    setup: Setup,
+    reacher: Reacher,
     zenith_step_deg: float = 5.0,
     azimuth_step_deg: float = 10.0,
     *,
-    reacher: Reacher | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> ReachabilityMap:
-    """IK success and manipulability over the setup's light cap, and with its environment the cells
-    the environment takes away (see the module docstring).
+    """IK success and manipulability over the light cap of the reacher's work cell, and with its
+    environment the cells the environment takes away (see the module docstring).
 
     Zenith from the sphere's ``zenith_min`` to ``zenith_max`` (both included) in steps of at most
     ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``. Each
     cell is one :meth:`Reacher.attempt` (IK, then a clear posture), started from a reached neighbour;
     then a cell left blocked is tried again from each clear neighbour's angles, until no more become
-    clear. ``reacher``: the setup's, when one is built; ``progress(done, total)`` per cell.
+    clear. ``progress(done, total)`` per cell.
     """
-    robot, sphere = setup.robot, setup.sphere
-    reacher = reacher or Reacher(setup)
+    cell = reacher.cell
+    robot, sphere = cell.robot, cell.sphere
     zmin, zmax = np.rad2deg(sphere.zenith_min), np.rad2deg(sphere.zenith_max)
     n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
     n_a = int(np.ceil(360.0 / azimuth_step_deg - 1e-9))
@@ -297,7 +295,7 @@ def reachability_map(
         residual[i, j] = attempt.ik.residual
         success[i, j] = True
         theta[i, j] = attempt.ik.theta if attempt.theta is None else attempt.theta
-        if setup.environment is not None:
+        if cell.environment is not None:
             clearance[i, j] = attempt.clearance
             taken[i, j] = attempt.theta is None
         manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
@@ -337,7 +335,7 @@ def reachability_map(
         theta,
         residual,
         time.perf_counter() - t0,
-        environment=setup.environment is not None,
+        environment=cell.environment is not None,
         taken=taken,
         clearance=clearance,
     )

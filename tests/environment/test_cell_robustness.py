@@ -205,5 +205,5 @@ def test_a_window_with_one_capture_has_no_unfollowed_segment() -> None:
     position = setup.sphere.center + setup.sphere.radius * setup.sphere.direction(0.5, 1.0)
     path = build_path(setup.sphere, position[None], [0], np.radians(2.0))
     warm = np.repeat(setup.start[None], path.n_knots, axis=0)
-    out = unfollowed_segments(setup, path, warm, np.zeros(0, dtype=np.int64))
+    out = unfollowed_segments(setup.workcell, setup.trajectory_spec, path, warm, np.zeros(0, dtype=np.int64))
     assert out.shape == (0,) and out.dtype == bool
