@@ -95,10 +95,14 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     setup = Setup.from_problem(problem)
     _, design, captures, _ = choose_captures(setup)
     placement = place_captures(setup, captures, design)
-    order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
+    order = (
+        tour_order(placement.thetas)
+        if design is not None
+        else visiting_order(setup.trajectory_spec, placement)
+    )
     positions = np.array([placement.landmarks[i].position for i in order])
-    path = capture_path(setup, positions, placement.thetas[order])
-    knots, _ = knot_ik(setup, path, placement.thetas[order])
+    path = capture_path(setup.sphere, setup.trajectory_spec, positions, placement.thetas[order])
+    knots, _ = knot_ik(setup.workcell, path, placement.thetas[order])
     trajectory = time_knots(setup, path, knots)
     elapsed = time.perf_counter() - start
     h = max(

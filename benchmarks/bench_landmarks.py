@@ -73,7 +73,7 @@ def run_problem(problem: str) -> dict[str, Any]:
     scene, objective = setup.scene, setup.objective
 
     t0 = time.perf_counter()
-    ours = find_landmarks(setup)
+    ours = find_landmarks(setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file)
     ours_time = time.perf_counter() - t0
 
     t0 = time.perf_counter()

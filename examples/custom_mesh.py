@@ -112,7 +112,10 @@ def main() -> None:
             f"{100 * shadowed:.1f}% of the relief in cast shadow"
         )
 
-    landmarks = optlight.find_landmarks(optlight.Setup.from_problem(problem))
+    setup = optlight.Setup.from_problem(problem)
+    landmarks = optlight.find_landmarks(
+        setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file
+    )
     print(
         f"{len(landmarks)} landmarks in {landmarks.time_s:.1f} s ({landmarks.iterations} IPOPT iterations):"
     )

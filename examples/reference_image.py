@@ -71,7 +71,10 @@ def main() -> None:
         ),
         landmarks=dataclasses.replace(base.landmarks, mode="free", count=args.landmarks),
     )
-    landmarks = optlight.find_landmarks(optlight.Setup.from_problem(problem))
+    setup = optlight.Setup.from_problem(problem)
+    landmarks = optlight.find_landmarks(
+        setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file
+    )
     print(
         f"{len(landmarks)} free landmarks in {landmarks.time_s:.1f} s "
         f"({landmarks.iterations} IPOPT iterations), in search order:"

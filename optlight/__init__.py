@@ -43,6 +43,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.plan import Plan
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
     from optlight.planning.lightsets import LightSetResult, design_light_set
+    from optlight.planning.policy import Reacher
     from optlight.planning.reach import ReachabilityMap, reachability_map
     from optlight.planning.timing import time_parameterize
     from optlight.planning.waypoints import Waypoints, controller_waypoints
@@ -56,6 +57,7 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.viz.drawing import FigureWorker
     from optlight.viz.images import save_gray_png
     from optlight.viz.preview import Preview
+    from optlight.workcell import ImageCosts, Workcell
 
 __version__ = "0.1.0"
 
@@ -65,6 +67,8 @@ _LAZY = {
     "Scene": "optlight.scene",
     "Objective": "optlight.objectives",
     "Setup": "optlight.setup",
+    "Workcell": "optlight.workcell",
+    "ImageCosts": "optlight.workcell",
     "LightSetResult": "optlight.planning.lightsets",
     "design_light_set": "optlight.planning.lightsets",
     "NormalRecovery": "optlight.photometric_stereo",
@@ -76,6 +80,7 @@ _LAZY = {
     "IKResult": "optlight.robot",
     "load_robot": "optlight.robot",
     "generalized_ik": "optlight.robot",
+    "Reacher": "optlight.planning.policy",
     "ReachabilityMap": "optlight.planning.reach",
     "reachability_map": "optlight.planning.reach",
     "Trajectory": "optlight.motion",

@@ -258,6 +258,7 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
 
 def _cmd_reach(args: argparse.Namespace) -> int:
     from optlight.export import check_output_folder, write_folder
+    from optlight.planning.policy import Reacher
     from optlight.planning.reach import reachability_map
     from optlight.preflight import preflight
 
@@ -265,7 +266,8 @@ def _cmd_reach(args: argparse.Namespace) -> int:
     problem = load_problem(args.problem)
     _check_reach_grid(problem, args.zenith_step, args.azimuth_step)
     setup = preflight(problem)
-    result = reachability_map(setup, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
+    reacher = Reacher(setup.workcell, setup.solver, setup.image_costs)
+    result = reachability_map(reacher, zenith_step_deg=args.zenith_step, azimuth_step_deg=args.azimuth_step)
     interrupts.check()
     png, js = write_folder(
         args.out, lambda folder: result.save(folder), overwrite=args.force, option="--out", force=FORCE

@@ -6,6 +6,8 @@ the solve draws nothing and writes nothing):
 
 1. ``scene``: :class:`~optlight.setup.Setup` — scene, objectives, robot, limits, environment, built once
    (not timed when the caller passes it built, as the command line does in its checks; still heard);
+   the stages after it take what they use of it: the work cell and the image costs
+   (:mod:`optlight.workcell`) and their own spec section;
 2. ``landmarks``: where the light should go (:func:`~optlight.planning.landmarks.find_landmarks`),
    on the lights whose housing stays out of the camera's view, or the ``[lightset]``'s lights
    designed together (:func:`~optlight.planning.set_landmarks.landmarks_of_set`, captured in a joint-
@@ -46,11 +48,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
-from optlight.errors import CaptureSolverError, SolverError
+from optlight.errors import CaptureSolverError, OutOfReachError, SolverError
+from optlight.geometry import LightSphere
 from optlight.motion import Trajectory
 from optlight.plan import Plan
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
+from optlight.planning.lightsets import Grid, SetCost, grid_from_problem, set_cost_from_problem
 from optlight.planning.path import LightPath, build_path
 from optlight.planning.policy import (
     LandmarkPlacement,
@@ -78,12 +82,14 @@ from optlight.planning.trajectory import (
     plan_transfer,
 )
 from optlight.planning.waypoints import Waypoints, controller_waypoints
+from optlight.relocation import base_hint
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import LandmarksSpec, Problem, SolverSpec, TrajectorySpec
 from optlight.spec.sizing import check_trajectory_samples
 from optlight.stages import OptimizedPath, Route, StageListener
 from optlight.threads import thread_count
 from optlight.verify import VerificationReport, verify_trajectory
+from optlight.workcell import Workcell
 
 Array = NDArray[np.float64]
 
@@ -105,8 +111,9 @@ def solve(
     (:class:`~optlight.report.FigureDrafts`), which draws the results folder's figures while the rest
     is solved.
 
-    Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
-    the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
+    Raises :class:`UnreachableError` for a landmark the robot cannot reach (naming, when it reaches
+    nothing clear or not a required landmark, a base position that would: :func:`~optlight.relocation.base_hint`),
+    :class:`SolverError` when the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
     shown); :meth:`Plan.save` refuses to export it.
     """
     notify = progress or (lambda stage, done, total: None)
@@ -128,30 +135,35 @@ def solve(
         with stage("scene"):
             setup = Setup.from_problem(problem)
     heard("scene", setup)
+    cell, trajectory_spec = setup.workcell, setup.trajectory_spec
 
     start = time.perf_counter()
-    reacher = Reacher(setup)
-    with PlacementAhead(setup, reacher) as ahead:
-        landmarks, design, captures, merged = choose_captures(
-            setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
-        )
-        timings["landmarks"] = time.perf_counter() - start
-        heard("landmarks", landmarks)
+    reacher = Reacher(cell, setup.solver, setup.image_costs)
+    try:
+        with PlacementAhead(reacher, setup.landmark_spec) as ahead:
+            landmarks, design, captures, merged = choose_captures(
+                setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
+            )
+            timings["landmarks"] = time.perf_counter() - start
+            heard("landmarks", landmarks)
 
-        with stage("placement"):  # what is left of it once the search is done
-            if design is None:
-                placement = ahead.placement(captures)
-            else:
-                placement = place_captures(setup, captures, design, reacher)
+            with stage("placement"):  # what is left of it once the search is done
+                if design is None:
+                    placement = ahead.placement(captures)
+                else:
+                    placement = place_captures(setup, captures, design, reacher)
+    except OutOfReachError as refused:  # the refusal names the base that would reach the cap
+        raise OutOfReachError(f"{refused}; {base_hint(setup)}") from None
     heard("placement", placement)
     notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
+        order = tour_order(placement.thetas) if design is not None else visiting_order(trajectory_spec, placement)
         visited = tuple(placement.landmarks[i] for i in order)
         landmark_thetas = placement.thetas[order]
-        path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
-        warm, failures = knot_ik(setup, path, landmark_thetas)
+        positions = np.array([lm.position for lm in visited])
+        path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
+        warm, failures = knot_ik(cell, path, landmark_thetas)
     heard("path", Route(order, visited, landmark_thetas, path, warm, failures))
     if failures.any():
         notes.append(f"per-knot IK did not converge at {failures.sum()} of {path.n_knots} knots (NLP warm start)")
@@ -160,7 +172,14 @@ def solve(
         while True:
             try:
                 path, warm, nlp = optimize_path(
-                    setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
+                    cell,
+                    trajectory_spec,
+                    setup.solver,
+                    path,
+                    warm,
+                    failures,
+                    landmark_thetas,
+                    lambda d, t: notify("nlp", d, t),
                 )
                 break
             except CaptureSolverError as error:
@@ -174,12 +193,12 @@ def solve(
                     f"found no way {error}; of its captures this one needs the largest reconfiguration"
                 )
                 visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
-                path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)
-                warm, failures = knot_ik(setup, path, landmark_thetas)
+                positions = np.array([lm.position for lm in visited])
+                path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
+                warm, failures = knot_ik(cell, path, landmark_thetas)
     heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
-    positions = np.array([lm.position for lm in visited])
     lightset = (
-        set_summary(setup, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
+        set_summary(cell.sphere, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
     )
     if path.transfers.any():
         joined = ", ".join(f"{s} → {s + 1}" for s in np.flatnonzero(path.transfers))
@@ -190,7 +209,7 @@ def solve(
         )
 
     with stage("timing"):
-        timed_path, timed_knots = knots_on_path(setup, path, nlp.theta)
+        timed_path, timed_knots = knots_on_path(cell, path, nlp.theta)
         trajectory = time_knots(setup, timed_path, timed_knots)
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory
@@ -198,7 +217,7 @@ def solve(
     heard("timing", trajectory)
 
     with stage("verify"):
-        waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, setup.trajectory_spec.rate_hz))
+        waypoints = controller_waypoints(trajectory, rate_hz=max(1000.0, trajectory_spec.rate_hz))
         report = verify_knots(setup, trajectory, positions, timed_knots, timed_path.transfers, waypoints)
     heard("verify", report)
     timings["total"] = time.perf_counter() - t_total
@@ -236,12 +255,32 @@ def choose_captures(
     each landmark of the search as it is found (:func:`~optlight.planning.landmarks.find_landmarks`;
     a light set's are not)."""
     design = None
-    if setup.problem.lightset.kind != "none":
-        landmarks, design = landmarks_of_set(setup, reacher, progress)
+    if setup.lightset_spec.kind != "none":
+        reacher = reacher or Reacher(setup.workcell, setup.solver, setup.image_costs)
+        landmarks, design = landmarks_of_set(
+            reacher, setup.lightset_spec, setup.landmark_spec, wanted_lights(setup), setup.file, progress
+        )
     else:
-        landmarks = find_landmarks(setup, progress=progress, found=found)
+        landmarks = find_landmarks(
+            setup.workcell,
+            setup.image_costs,
+            setup.landmark_spec,
+            setup.solver,
+            setup.file,
+            progress=progress,
+            found=found,
+        )
     captures, merged = distinct_landmarks(landmarks.landmarks, np.deg2rad(setup.landmark_spec.distinct_deg))
     return landmarks, design, captures, merged
+
+
+def wanted_lights(setup: Setup) -> Grid | SetCost:
+    """What the ``[lightset]`` asks for: its grid (kind "grid",
+    :func:`~optlight.planning.lightsets.grid_from_problem`) or its set cost on the search scene
+    (:func:`~optlight.planning.lightsets.set_cost_from_problem`)."""
+    if setup.lightset_spec.kind == "grid":
+        return grid_from_problem(setup.problem)
+    return set_cost_from_problem(setup.problem, setup.search_scene, setup.search_objective)
 
 
 def place_captures(
@@ -251,9 +290,13 @@ def place_captures(
     replaces a light the robot cannot reach clear by the one that best keeps the set
     (:class:`~optlight.planning.set_landmarks.SetReplacement`). ``reacher``: the setup's, when one
     is built."""
-    reacher = reacher or Reacher(setup)
-    replacement = SetReplacement(setup, design, captures, reacher) if design is not None else None
-    return place_landmarks(setup, captures, reacher, replacement=replacement)
+    reacher = reacher or Reacher(setup.workcell, setup.solver, setup.image_costs)
+    replacement = (
+        SetReplacement(reacher, design, captures, setup.lightset_spec, setup.landmark_spec)
+        if design is not None
+        else None
+    )
+    return place_landmarks(reacher, setup.landmark_spec, captures, replacement=replacement)
 
 
 class PlacementAhead:
@@ -274,10 +317,9 @@ class PlacementAhead:
     workers) nothing runs ahead. As a context manager, leaving it stops the thread (after the
     landmark it is placing): a Ctrl-C during the search does not wait for the chain."""
 
-    def __init__(self, setup: Setup, reacher: Reacher) -> None:
-        self.setup = setup
-        self.reacher = reacher
-        self._chain = PlacementChain(setup, reacher)
+    def __init__(self, reacher: Reacher, spec: LandmarksSpec) -> None:
+        self.reacher, self.spec = reacher, spec
+        self._chain = PlacementChain(reacher, spec)
         self._offered: list[Landmark] = []
         self._queue: queue.SimpleQueue[Landmark | None] = queue.SimpleQueue()
         self._error: BaseException | None = None
@@ -308,7 +350,7 @@ class PlacementAhead:
             c is o for c, o in zip(captures, self._offered, strict=True)
         )
         if self._thread is None or not ahead:
-            return place_landmarks(self.setup, captures, self.reacher)
+            return place_landmarks(self.reacher, self.spec, captures)
         if self._error is not None:
             raise self._error
         return self._chain.finish()
@@ -326,15 +368,17 @@ class PlacementAhead:
         self._join()
 
 
-def capture_path(setup: Setup, positions: Array, landmark_thetas: Array) -> LightPath:
-    """Great-circle knots through the captures ``positions`` (M, 3) (m) in their visiting order, at
-    ``[trajectory] knot_spacing_deg``; between two captures whose postures ``landmark_thetas`` (M, n)
-    differ by Δ (rad, largest joint), at least ⌈2Δ / max_step_rad⌉ + 1 intervals, so that the NLP's
-    step bound |θ_{k+1} − θ_k|∞ ≤ max_step_rad leaves room to go between the postures."""
-    spec = setup.trajectory_spec
+def capture_path(
+    sphere: LightSphere, spec: TrajectorySpec, positions: Array, landmark_thetas: Array
+) -> LightPath:
+    """Great-circle knots on ``sphere`` through the captures ``positions`` (M, 3) (m) in their
+    visiting order, at ``spec.knot_spacing_deg`` (``[trajectory]``); between two captures whose
+    postures ``landmark_thetas`` (M, n) differ by Δ (rad, largest joint), at least
+    ⌈2Δ / max_step_rad⌉ + 1 intervals, so that the NLP's step bound |θ_{k+1} − θ_k|∞ ≤ max_step_rad
+    leaves room to go between the postures."""
     reconfiguration = np.abs(np.diff(landmark_thetas, axis=0)).max(axis=1, initial=0.0)
     return build_path(
-        setup.sphere,
+        sphere,
         positions,
         np.arange(len(positions)),
         np.deg2rad(spec.knot_spacing_deg),
@@ -347,14 +391,17 @@ NLP_WINDOW_KNOTS = 48
 
 
 def optimize_path(
-    setup: Setup,
+    cell: Workcell,
+    spec: TrajectorySpec,
+    solver: SolverSpec,
     path: LightPath,
     warm: Array,
     failures: NDArray[np.int64],
     landmark_thetas: Array,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
-    """The trajectory NLP, window by window along the path (:meth:`LightPath.windows`, about
+    """The trajectory NLP of ``cell``'s robot (``spec``: ``[trajectory]``, ``solver``: ``[solver]``),
+    window by window along the path (:meth:`LightPath.windows`, about
     :data:`NLP_WINDOW_KNOTS` knots each, cut at captures), warm-started at the per-knot IK ``warm``
     (K, n); a window starts at the posture the window before it ended at (its first knot fixed,
     :func:`optimize_window`), and where it finds no way from there, it is solved again together with
@@ -375,9 +422,11 @@ def optimize_path(
             postures, initial, missed = landmark_thetas[start : last + 1].copy(), warm[knots], failures[start:last]
             if fixed:  # from the posture the window before ended at
                 postures[0] = theta[knots.start]
-                initial, missed = knot_ik(setup, window, postures)
+                initial, missed = knot_ik(cell, window, postures)
             try:
-                window, warm_window, result = optimize_window(setup, window, initial, missed, postures, fixed)
+                window, warm_window, result = optimize_window(
+                    cell, spec, solver, window, initial, missed, postures, fixed
+                )
                 break
             except SolverError as e:
                 error = e
@@ -389,11 +438,13 @@ def optimize_path(
         results.append(result)
         if progress is not None:
             progress(done + 1, len(windows))
-    return path.with_transfers(transfers), warm, _joined(results, theta, knot_cost(setup, theta))
+    return path.with_transfers(transfers), warm, _joined(results, theta, knot_cost(cell, theta))
 
 
 def optimize_window(
-    setup: Setup,
+    cell: Workcell,
+    spec: TrajectorySpec,
+    solver: SolverSpec,
     path: LightPath,
     warm: Array,
     failures: NDArray[np.int64],
@@ -409,15 +460,16 @@ def optimize_window(
     warm start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such
     segment, or again. Where there are such segments, the solve on the sphere is told the transfers
     can follow (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry)."""
-    unfollowed = unfollowed_segments(setup, path, warm, failures)
+    unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
+    nlp = partial(optimize_knots, cell, spec, solver)
     try:
-        return path, warm, optimize_knots(setup, path, warm, fixed_start, fallback=bool(unfollowed.any()))
+        return path, warm, nlp(path, warm, fixed_start, fallback=bool(unfollowed.any()))
     except SolverError:
         if not unfollowed.any():
             raise
     path = path.with_transfers(unfollowed)
-    warm, _ = knot_ik(setup, path, landmark_thetas)
-    return path, warm, optimize_knots(setup, path, warm, fixed_start)
+    warm, _ = knot_ik(cell, path, landmark_thetas)
+    return path, warm, nlp(path, warm, fixed_start)
 
 
 def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -> TrajectoryNLPResult:
@@ -446,29 +498,29 @@ def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
 
 
 def unfollowed_segments(
-    setup: Setup, path: LightPath, warm: Array, failures: NDArray[np.int64]
+    cell: Workcell, spec: TrajectorySpec, path: LightPath, warm: Array, failures: NDArray[np.int64]
 ) -> NDArray[np.bool_]:
     """(M − 1,) the segments whose arc the per-knot IK ``warm`` (K, n) did not follow: where it missed
-    a knot (``failures`` (M − 1,)), jumped further than ``[trajectory] max_step_rad`` between two
+    a knot (``failures`` (M − 1,)), jumped further than ``spec.max_step_rad`` between two
     knots (to another IK branch) or, with obstacles, put the arm into one at a knot (a clearance row
     of the NLPs' sphere model below 0)."""
-    segments, environment = path.segments(), setup.environment
+    segments, environment = path.segments(), cell.environment
     jumps = np.array([np.abs(np.diff(warm[s], axis=0)).max() for s in segments])
-    unfollowed = (failures > 0) | (jumps > setup.trajectory_spec.max_step_rad)
+    unfollowed = (failures > 0) | (jumps > spec.max_step_rad)
     if environment is not None and environment.collisions:
-        clearance = np.array([environment.sphere_clearance(setup.robot, q)[0].min() for q in warm])
+        clearance = np.array([environment.sphere_clearance(cell.robot, q)[0].min() for q in warm])
         unfollowed |= np.array([clearance[s].min() < 0.0 for s in segments], dtype=bool)  # none: (0,) bool
     return unfollowed
 
 
-def knots_on_path(setup: Setup, path: LightPath, theta: Array) -> tuple[LightPath, Array]:
-    """The path and its knots ``theta`` (K, n) (rad) with knots added on the great-circle arcs of the
-    segments on the sphere where two knots' lights are far apart
+def knots_on_path(cell: Workcell, path: LightPath, theta: Array) -> tuple[LightPath, Array]:
+    """The path and its knots ``theta`` (K, n) (rad) of ``cell``'s robot with knots added on the
+    great-circle arcs of the segments on the sphere where two knots' lights are far apart
     (:func:`~optlight.planning.trajectory.knots_on_arcs`): the planned path the timing follows and
     the verification measures against. The added knots' directions, positions and rotations are
     their lights' (as are those of the other knots of their segment); the transfers' are kept."""
     segments = path.segments()
-    refined = [theta[s] if off else knots_on_arcs(setup, theta[s]) for s, off in zip(segments, path.transfers, strict=True)]
+    refined = [theta[s] if off else knots_on_arcs(cell, theta[s]) for s, off in zip(segments, path.transfers, strict=True)]
     if sum(len(k) for k in refined) == sum(s.stop - s.start for s in segments):
         return path, theta
     knots, directions, positions, rotations = [theta[:1]], [path.directions[:1]], [path.positions[:1]], [path.rotations[:1]]
@@ -476,9 +528,9 @@ def knots_on_path(setup: Setup, path: LightPath, theta: Array) -> tuple[LightPat
         if off:
             poses = (path.directions[s], path.positions[s], path.rotations[s])
         else:
-            a, r = zip(*(setup.robot.light_pose(q) for q in part), strict=True)
+            a, r = zip(*(cell.robot.light_pose(q) for q in part), strict=True)
             a_arr = np.array(a)
-            d = a_arr - setup.sphere.center
+            d = a_arr - cell.sphere.center
             poses = (d / np.linalg.norm(d, axis=1, keepdims=True), a_arr, np.array(r))
         knots.append(part[1:])
         for out, values in zip((directions, positions, rotations), poses, strict=True):
@@ -500,15 +552,17 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     (:func:`~optlight.planning.trajectory.follow_planned_path`); the whole motion slowed where its
     joint torques would exceed the robot's limits
     (:func:`~optlight.planning.torque_scaling.within_torque_limits`)."""
-    spec, limits = setup.trajectory_spec, setup.limits
-    approach = plan_transfer(setup, setup.start, theta[0])
+    spec, cell, limits = setup.trajectory_spec, setup.workcell, setup.limits
+    approach = plan_transfer(cell, setup.solver, cell.start, theta[0])
     retreat = (
-        plan_transfer(setup, theta[-1], setup.start, detour=np.vstack([theta[::-1], approach[::-1]]))
+        plan_transfer(
+            cell, setup.solver, theta[-1], cell.start, detour=np.vstack([theta[::-1], approach[::-1]])
+        )
         if spec.return_home
         else None
     )
     segments = [
-        theta[s] if off else follow_planned_path(setup, theta[s])
+        theta[s] if off else follow_planned_path(cell, theta[s])
         for s, off in zip(path.segments(), path.transfers, strict=True)
     ] or [theta[:1]]  # one landmark: its dwell
 

@@ -18,8 +18,12 @@
   clear configuration nearest it when the reference is not clear: ``start_note`` says which);
 - the generalized IK's settings from ``[solver]``.
 
-The planners take a ``Setup`` and read their configuration from its typed sections (``landmark_spec``,
-``trajectory_spec``, ``solver``, ``environment_spec``); none takes a :class:`~optlight.spec.Problem`.
+The planners take neither a ``Setup`` nor a :class:`~optlight.spec.Problem`: they take what
+``Setup`` builds for them once, its :class:`~optlight.workcell.Workcell` (``workcell``: robot, allowed
+sphere, limits, environment, IK settings, view zenith, start) and
+:class:`~optlight.workcell.ImageCosts` (``image_costs``), with their own typed sections
+(``landmark_spec``, ``trajectory_spec``, ``lightset_spec``, ``solver``); the solve
+(:mod:`optlight.pipeline`) hands them over.
 Building a ``Setup`` is also the check of everything a run touches that the problem file alone cannot
 show (the mesh loads, the URDF parses and has the frame, the reference image matches the camera, the
 object fits in the light sphere, the camera sees it): each such mistake is a
@@ -32,6 +36,7 @@ import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -50,38 +55,16 @@ from optlight.scene import Scene
 from optlight.spec import (
     EnvironmentSpec,
     LandmarksSpec,
+    LightSetSpec,
     Problem,
     SolverSpec,
     TrajectorySpec,
     load_problem,
 )
 from optlight.spec.sizing import check_memory, check_trajectory_size, planned_captures
+from optlight.workcell import ImageCosts, MotionLimits, Workcell
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class MotionLimits:
-    """The joint limits a plan keeps, per joint: position ``lower``/``upper`` (rad or m),
-    ``velocity`` (the robot's times ``[robot] velocity_scale``, rad/s), ``acceleration`` (rad/s²) and
-    ``jerk`` (rad/s³)."""
-
-    lower: Array
-    upper: Array
-    velocity: Array
-    acceleration: Array
-    jerk: Array
-
-    @classmethod
-    def of(cls, robot: Robot, velocity_scale: float) -> MotionLimits:
-        """The limits of ``robot`` with its velocity limits scaled by ``velocity_scale`` ∈ (0, 1]."""
-        return cls(
-            robot.lower,
-            robot.upper,
-            robot.velocity_limit * velocity_scale,
-            robot.acceleration_limit,
-            robot.jerk_limit,
-        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,18 +131,44 @@ class Setup:
             start_note=start_note,
         )
 
+    @cached_property
+    def workcell(self) -> Workcell:
+        """What the planners share of the robot and its cell (:class:`~optlight.workcell.Workcell`),
+        built once per setup."""
+        sphere = dataclasses.replace(
+            self.scene.sphere, zenith_min=max(self.scene.sphere.zenith_min, self.view_zenith)
+        )
+        return Workcell(
+            robot=self.robot,
+            sphere=sphere,
+            limits=self.limits,
+            environment=self.environment,
+            ik=self.ik,
+            view_zenith=self.view_zenith,
+            start=self.start,
+        )
+
+    @cached_property
+    def image_costs(self) -> ImageCosts:
+        """The objective on the camera's and on the search scene
+        (:class:`~optlight.workcell.ImageCosts`), built once per setup."""
+        return ImageCosts(self.scene, self.objective, self.search_scene, self.search_objective)
+
     @property
     def sphere(self) -> LightSphere:
         """The light sphere (centre O, radius b, frame) with the zenith range the lights may use:
         ``[light_sphere]``'s, less the lights whose housing would enter the camera's view."""
-        return dataclasses.replace(
-            self.scene.sphere, zenith_min=max(self.scene.sphere.zenith_min, self.view_zenith)
-        )
+        return self.workcell.sphere
 
     @property
     def landmark_spec(self) -> LandmarksSpec:
         """``[landmarks]``: how the landmark search runs."""
         return self.problem.landmarks
+
+    @property
+    def lightset_spec(self) -> LightSetSpec:
+        """``[lightset]``: the light set to design or map (kind "none": the landmark search)."""
+        return self.problem.lightset
 
     @property
     def trajectory_spec(self) -> TrajectorySpec:

@@ -15,6 +15,8 @@ from typing import Any
 
 import pytest
 
+from optlight.planning.landmarks import LandmarkSet, find_landmarks
+from optlight.planning.policy import Reacher
 from optlight.setup import Setup
 from optlight.spec import Problem, load_problem, problem_from_dict
 
@@ -64,6 +66,18 @@ def small_default() -> Problem:
 def small_setup(small_default: Problem) -> Setup:
     """:func:`small_default` built once."""
     return Setup.from_problem(small_default)
+
+
+def reacher_of(setup: Setup) -> Reacher:
+    """The reacher a solve builds for ``setup``: its work cell, ``[solver]`` and image costs."""
+    return Reacher(setup.workcell, setup.solver, setup.image_costs)
+
+
+def search_landmarks(setup: Setup, **kwargs: Any) -> LandmarkSet:
+    """The landmark search of a solve over ``setup`` (``find_landmarks`` with what it takes of it)."""
+    return find_landmarks(
+        setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file, **kwargs
+    )
 
 
 def snapshot(root: Path) -> dict[str, str]:

@@ -232,7 +232,8 @@ problem = problem_from_dict(data, source=load_problem("default").source)
 with open("/proc/self/clear_refs", "w") as f:
     f.write("5")  # reset the peak resident size (VmHWM) to the current one
 before = status("VmRSS:")
-find_landmarks(Setup.from_problem(problem))
+setup = Setup.from_problem(problem)
+find_landmarks(setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file)
 print(status("VmHWM:") - before)
 """
 

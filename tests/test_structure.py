@@ -21,7 +21,8 @@ PACKAGE = ROOT / "optlight"
 
 #: The layers, lowest first: a module may import from its own layer's package and from lower layers.
 #: Where the light goes (objectives, landmarks) and how the robot gets there (policy, path,
-#: trajectory NLP, timing) both live in planning, above the built setup and below verification.
+#: trajectory NLP, timing) both live in planning, above the built setup and below verification; they
+#: take the work cell (optlight.workcell), below the setup that builds it.
 LAYERS: list[set[str]] = [
     {"errors", "jsondata", "interrupts", "cache", "threads"},
     {"locks"},
@@ -29,6 +30,7 @@ LAYERS: list[set[str]] = [
     {"geometry", "motion"},
     {"scene", "robot"},
     {"objectives", "environment", "photometric_stereo", "random_cells"},
+    {"workcell"},
     {"setup"},
     {"capture"},
     {"planning"},
@@ -39,6 +41,7 @@ LAYERS: list[set[str]] = [
     {"viz"},
     {"report"},
     {"plan"},
+    {"relocation"},
     {"pipeline", "preflight"},
     {"acquisition", "batch", "simulation"},
     {"cell"},
@@ -135,14 +138,6 @@ def test_no_import_cycles() -> None:
 #: and hands each stage's result to its listener (optlight.stages); it draws and writes nothing.
 PRESENTATION = ("optlight.report", "optlight.viz")
 
-#: The planning modules that still take the whole Setup and read what they need through it (the
-#: robot, sphere, limits, environment, scenes, objectives, solver settings and spec sections): the
-#: landmark search and the light-set design (the search scene and objective, the spec sections),
-#: the placement and its policy (Reacher: IK, posture and placement NLPs on the setup's robot,
-#: sphere and environment), the reachability map (through Reacher) and the trajectory NLP (robot,
-#: limits, environment, solver settings). The other planning modules take what they use.
-PLANNING_TAKING_SETUP = {"landmarks", "placement", "policy", "reach", "set_landmarks", "trajectory"}
-
 
 def test_the_solve_imports_no_presentation_module() -> None:
     """pipeline.py imports neither the report nor the figures (type-only imports included): the
@@ -152,14 +147,24 @@ def test_the_solve_imports_no_presentation_module() -> None:
 
 
 def test_planning_modules_take_what_they_use() -> None:
-    """No planning module imports the setup module (type-only imports included) but those of
-    :data:`PLANNING_TAKING_SETUP`, which still take the whole Setup."""
-    importing = {
-        module.removeprefix("optlight.planning.").split(".")[0]  # a package's modules count as the package
+    """No planning module imports the setup module or its ``Setup`` (type-only imports included):
+    the planners take the work cell, the image costs and their spec sections that ``Setup`` builds,
+    never the whole setup nor, through it, the problem."""
+    importing = sorted(
+        module
         for module, targets in _graph().items()
-        if module.startswith("optlight.planning.") and any(t == "optlight.setup" for t, _ in targets)
-    }
-    assert importing <= PLANNING_TAKING_SETUP, sorted(importing - PLANNING_TAKING_SETUP)
+        if module.startswith("optlight.planning") and any(t == "optlight.setup" for t, _ in targets)
+    )
+    assert not importing, importing
+    naming = sorted(
+        _module_name(path)
+        for path in (PACKAGE / "planning").rglob("*.py")
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.ImportFrom)
+        and (node.module or "").startswith("optlight")
+        and any(alias.name == "Setup" for alias in node.names)
+    )
+    assert not naming, naming
 
 
 def test_no_module_imports_another_modules_private_names() -> None:
@@ -304,6 +309,10 @@ def test_installed_package_solves_from_another_folder(tmp_path: Path) -> None:
     )
     assert check.returncode == 0, check.stderr
     bench = subprocess.run(
-        [sys.executable, "-m", "optlight.cli", "bench", "--quick"], capture_output=True, text=True, cwd=work, env=env
+        [sys.executable, "-m", "optlight.cli", "bench", "--quick"],
+        capture_output=True,
+        text=True,
+        cwd=work,
+        env=env,
     )
     assert bench.returncode == 2 and bench.stderr.count("\n") == 1 and "source repository" in bench.stderr

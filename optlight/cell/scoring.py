@@ -20,7 +20,10 @@ from optlight.spec import Problem
 
 def landmark_lights(problem: Problem) -> Array:
     """(N, 2) zenith, azimuth (rad) of the problem's landmarks."""
-    landmarks = find_landmarks(Setup.from_problem(problem))
+    setup = Setup.from_problem(problem)
+    landmarks = find_landmarks(
+        setup.workcell, setup.image_costs, setup.landmark_spec, setup.solver, setup.file
+    )
     return np.column_stack([landmarks.zeniths, landmarks.azimuths])
 
 
@@ -36,7 +39,7 @@ def evaluate_placement(problem: Problem, lights: Array) -> dict[str, Any]:
     out: dict[str, Any] = {**unscored(len(lights)), "error": None}
     try:
         setup = Setup.from_problem(problem)
-        reacher, robot = Reacher(setup), setup.robot
+        reacher, robot = Reacher(setup.workcell, setup.solver, setup.image_costs), setup.robot
         thetas = []
         previous = robot.theta_ref
         for zenith, azimuth in lights[np.argsort(lights[:, 1], kind="stable")]:

@@ -11,7 +11,7 @@ For a light position a* on the sphere:
    angles; when the IK needed random restarts, from the start, then the one nearest the IK's angles
    (a redundant arm has other postures for one light).
 
-:class:`Reacher` does that (built once per setup; its NLPs on first need), and the reachability map
+:class:`Reacher` does that (built once per work cell; its NLPs on first need), and the reachability map
 and :func:`place_landmarks` both use it. Where no attempt gives clear angles for a landmark,
 :func:`place_landmarks` runs the joint-space placement NLP (:class:`LightPlacement`), which moves the
 landmark along its azimuth to the best light the robot reaches clear.
@@ -30,12 +30,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK
-from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
+from optlight.errors import IPOPT_ITERATION_LIMIT, OutOfReachError
 from optlight.planning.landmarks import Landmark, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
-from optlight.robot import IKResult, generalized_ik
-from optlight.setup import Setup
+from optlight.robot import IKResult, Robot, generalized_ik
+from optlight.spec import LandmarksSpec, SolverSpec, TrajectorySpec
+from optlight.workcell import ImageCosts, Workcell
 
 Array = NDArray[np.float64]
 
@@ -66,28 +67,29 @@ class LandmarkPlacement:
 
 
 class Reacher:
-    """IK, then a clear posture, for the lights of one setup (module docstring, steps 1–2)."""
+    """IK, then a clear posture, for the lights of one work cell (module docstring, steps 1–2); its
+    NLPs (clear posture, placement on ``costs``' search scene) with IPOPT's settings from ``solver``."""
 
-    def __init__(self, setup: Setup) -> None:
-        self.setup = setup
+    def __init__(self, cell: Workcell, solver: SolverSpec, costs: ImageCosts) -> None:
+        self.cell, self.solver, self.costs = cell, solver, costs
         self._posture: ClearPosture | None = None
         self._placement: LightPlacement | None = None
 
     def attempt(self, position: Array, start: Array, *, restarts: bool = True) -> Attempt:
-        """Joint angles that put the light at ``position`` (m, on the sphere), clear of the setup's
+        """Joint angles that put the light at ``position`` (m, on the sphere), clear of the cell's
         environment, from the IK started at ``start`` (rad)."""
-        setup = self.setup
-        ik = generalized_ik(setup.robot, setup.sphere, position, start, restarts=restarts, **setup.ik)
-        environment = setup.environment
+        cell = self.cell
+        ik = generalized_ik(cell.robot, cell.sphere, position, start, restarts=restarts, **cell.ik)
+        environment = cell.environment
         if not ik.success:
             return Attempt(ik, math.inf, "", None)
         if environment is None:
             return Attempt(ik, math.inf, "", ik.theta)
-        clearance, row = environment.worst_sphere_row(setup.robot, ik.theta)
+        clearance, row = environment.worst_sphere_row(cell.robot, ik.theta)
         if clearance >= CAPTURE_SLACK:
             return Attempt(ik, clearance, row, ik.theta)
         if self._posture is None:
-            self._posture = ClearPosture(setup, environment)
+            self._posture = ClearPosture(cell, environment, self.solver)
         # The posture nearest the start: a chain of landmarks keeps its posture where a clear one is
         # near it. When the IK went to the light from the start without random restarts, one solve
         # from the IK's angles: they hold the light already, so IPOPT has only the clearance to
@@ -111,9 +113,9 @@ class Reacher:
 
     @property
     def placement(self) -> LightPlacement:
-        """The joint-space placement NLP of the setup, built on first use."""
+        """The joint-space placement NLP of the cell, built on first use."""
         if self._placement is None:
-            self._placement = LightPlacement(self.setup)
+            self._placement = LightPlacement(self.cell, self.costs, self.solver)
         return self._placement
 
 
@@ -127,9 +129,9 @@ Replacement = Callable[[Landmark, Sequence[Attempt], Array], tuple[Landmark, Arr
 
 
 def place_landmarks(
-    setup: Setup,
+    reacher: Reacher,
+    spec: LandmarksSpec,
     landmarks: Sequence[Landmark],
-    reacher: Reacher | None = None,
     *,
     replacement: Replacement | None = None,
 ) -> LandmarkPlacement:
@@ -138,11 +140,10 @@ def place_landmarks(
     :class:`AzimuthPlacement`: the best light the robot reaches clear on the landmark's azimuth) puts
     another light in its place, with a warning that says how far it moved and why.
 
-    Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons)
-    and where the base would reach the cap (:func:`~optlight.planning.reach.base_hint`), unless
-    ``[landmarks] allow_partial``, which drops it with a warning.
+    Raises :class:`OutOfReachError` naming the first landmark neither reaches (with both reasons),
+    unless ``spec.allow_partial`` (``[landmarks]``), which drops it with a warning.
     """
-    chain = PlacementChain(setup, reacher, replacement=replacement)
+    chain = PlacementChain(reacher, spec, replacement=replacement)
     for lm in landmarks:
         chain.add(lm)
     return chain.finish()
@@ -154,19 +155,18 @@ class PlacementChain:
     placement of a landmark needs only the landmarks before it, so a chain can follow a search that
     finds them one by one (:class:`~optlight.pipeline.PlacementAhead`)."""
 
-    def __init__(self, setup: Setup, reacher: Reacher | None = None, *, replacement: Replacement | None = None):
-        self.setup = setup
-        self.reacher = reacher if reacher is not None else Reacher(setup)
-        self.rule = replacement if replacement is not None else AzimuthPlacement(setup, self.reacher)
+    def __init__(self, reacher: Reacher, spec: LandmarksSpec, *, replacement: Replacement | None = None):
+        self.reacher, self.spec = reacher, spec
+        self.rule = replacement if replacement is not None else AzimuthPlacement(reacher)
         self.kept: list[Landmark] = []
         self.thetas: list[Array] = []
         self.notes: list[str] = []
-        self.previous = setup.robot.theta_ref
+        self.previous = reacher.cell.robot.theta_ref
 
     def add(self, lm: Landmark) -> None:
         """Place ``lm`` after the landmarks added before it (:func:`place_landmarks`); raises
-        :class:`UnreachableError` as it does."""
-        setup, robot = self.setup, self.setup.robot
+        :class:`OutOfReachError` as it does."""
+        robot = self.reacher.cell.robot
         attempts = []
         for start, restarts in ((self.previous, False), (robot.theta_ref, True)):
             attempts.append(self.reacher.attempt(lm.position, start, restarts=restarts))
@@ -193,13 +193,8 @@ class PlacementChain:
             f"landmark {lm.index} (zenith {np.rad2deg(lm.zenith):.1f}°, azimuth "
             f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; {found}"
         )
-        if not setup.landmark_spec.allow_partial:
-            from optlight.planning.reach import base_hint  # reach builds on this module's Reacher
-
-            raise UnreachableError(
-                f"{where}; set [landmarks] allow_partial = true to plan the landmarks it reaches, or "
-                f"{base_hint(setup)}"
-            )
+        if not self.spec.allow_partial:
+            raise OutOfReachError(f"{where}; set [landmarks] allow_partial = true to plan the landmarks it reaches")
         self.notes.append(f"dropped {where}")
 
     def _keep(self, lm: Landmark, theta: Array) -> None:
@@ -208,20 +203,18 @@ class PlacementChain:
         self.previous = theta
 
     def finish(self) -> LandmarkPlacement:
-        """The placement of the landmarks added; raises :class:`UnreachableError` when none is kept."""
+        """The placement of the landmarks added; raises :class:`OutOfReachError` when none is kept."""
         if not self.kept:
-            from optlight.planning.reach import base_hint  # reach builds on this module's Reacher
-
-            raise UnreachableError(f"no landmark is reachable by {self.setup.robot.name}; {base_hint(self.setup)}")
+            raise OutOfReachError(f"no landmark is reachable by {self.reacher.cell.robot.name}")
         thetas = _follow_back(self.reacher, self.kept, np.array(self.thetas))
         return LandmarkPlacement(tuple(self.kept), thetas, tuple(self.notes))
 
 
-def why_moved(setup: Setup, best: Attempt) -> str:
-    """Why a landmark moved, from its best attempt: "to be reachable by …" or "to clear the
-    environment (… was … mm too close)"."""
+def why_moved(robot: Robot, best: Attempt) -> str:
+    """Why a landmark moved, from its best attempt: "to be reachable by …" (``robot``) or "to clear
+    the environment (… was … mm too close)"."""
     if not best.ik.success:
-        return f"to be reachable by {setup.robot.name}"
+        return f"to be reachable by {robot.name}"
     return f"to clear the environment ({best.row} was {too_close_mm(best.clearance):.1f} mm too close)"
 
 
@@ -255,8 +248,7 @@ class AzimuthPlacement:
     the NLP from the IK's unconverged angles and from the previous capture's found the azimuth
     infeasible."""
 
-    def __init__(self, setup: Setup, reacher: Reacher) -> None:
-        self.setup = setup
+    def __init__(self, reacher: Reacher) -> None:
         self.reacher = reacher
 
     def __call__(
@@ -278,9 +270,10 @@ class AzimuthPlacement:
                 placed = placement.solve(lm.azimuth, theta)
                 if placed.success:
                     break
-        sphere = self.setup.sphere
+        cell = self.reacher.cell
+        sphere = cell.sphere
         if not placed.success:
-            clear_of = " clear of the environment" if self.setup.environment is not None else ""
+            clear_of = " clear of the environment" if cell.environment is not None else ""
             return (
                 f"nor is any light on its azimuth{clear_of} within zenith "
                 f"{np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
@@ -303,13 +296,13 @@ class AzimuthPlacement:
             if before != after
             else f"kept at zenith {before} with the placement's joint angles"
         )
-        note = f"{how} {why_moved(self.setup, attempts[0])} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
+        note = f"{how} {why_moved(cell.robot, attempts[0])} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
         return moved, placed.theta, note
 
     def _clear_on_azimuth(self, lm: Landmark, previous: Array) -> Iterator[Array]:
         """Clear joint angles holding a light on ``lm``'s azimuth (the reacher from ``previous``,
         no restarts), at the allowed zeniths :data:`SCAN_STEP` apart, nearest ``lm.zenith`` first."""
-        sphere = self.setup.sphere
+        sphere = self.reacher.cell.sphere
         zeniths = zenith_grid(sphere, SCAN_STEP)
         for zenith in zeniths[np.argsort(np.abs(zeniths - lm.zenith), kind="stable")]:
             found = self.reacher.attempt(sphere.position(zenith, lm.azimuth), previous, restarts=False).theta
@@ -338,25 +331,26 @@ def _follow_back(reacher: Reacher, landmarks: Sequence[Landmark], thetas: Array)
     return thetas
 
 
-def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int64]:
-    """Azimuth order, or a short open tour in joint space (``[trajectory] order``)."""
-    if setup.trajectory_spec.order == "tour":
+def visiting_order(spec: TrajectorySpec, placement: LandmarkPlacement) -> NDArray[np.int64]:
+    """Azimuth order, or a short open tour in joint space (``spec.order``, ``[trajectory] order``)."""
+    if spec.order == "tour":
         thetas = placement.thetas
         return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
     return azimuth_order([lm.azimuth for lm in placement.landmarks])
 
 
-def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Array, NDArray[np.int64]]:
-    """Per-knot generalized IK along the path (the paper's pipeline, and the trajectory NLP's warm
-    start), through the landmarks' own joint angles ``landmark_thetas`` (M, n, visiting order: the
-    placement's, clear of the environment): a landmark knot takes its landmark's angles; an interior
-    knot k of a segment ending at knot k₁ starts the IK from θ_{k−1} + (θ_{L} − θ_{k−1}) / (k₁ − k + 1),
+def knot_ik(cell: Workcell, path: LightPath, landmark_thetas: Array) -> tuple[Array, NDArray[np.int64]]:
+    """Per-knot generalized IK of ``cell``'s robot on its sphere along the path (the paper's
+    pipeline, and the trajectory NLP's warm start), through the landmarks' own joint angles
+    ``landmark_thetas`` (M, n, visiting order: the placement's, clear of the environment): a
+    landmark knot takes its landmark's angles; an interior knot k of a segment ending at knot k₁
+    starts the IK from θ_{k−1} + (θ_{L} − θ_{k−1}) / (k₁ − k + 1),
     a share of the way to the next landmark's angles θ_L, so the chain arrives at the posture the
     placement chose rather than wherever continuation leads. A transfer segment (off the sphere,
     :attr:`LightPath.transfers`) takes the straight line in joint space between its landmarks'
     angles. Returns the (K, n) angles and, per segment (M − 1,), the number of knots where IK did
     not converge."""
-    robot = setup.robot
+    robot = cell.robot
     thetas = np.empty((path.n_knots, robot.n))
     knots = path.landmark_knots
     thetas[knots] = landmark_thetas
@@ -371,7 +365,7 @@ def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Arra
             previous = thetas[k - 1]
             start = previous + (goal - previous) / (last - k + 1)
             # no random restarts: a restart lands on another IK branch, a jump the path cannot make
-            result = generalized_ik(robot, setup.sphere, path.positions[k], start, restarts=False, **setup.ik)
+            result = generalized_ik(robot, cell.sphere, path.positions[k], start, restarts=False, **cell.ik)
             failures[s] += not result.success
             thetas[k] = result.theta
     return thetas, failures

@@ -44,8 +44,6 @@ from optlight.geometry import direction_in_sphere_frame
 from optlight.planning.lightsets import angles_of
 from optlight.planning.policy import Reacher
 from optlight.robot import KinematicState, manipulability
-from optlight.setup import Setup
-from optlight.spec import Problem, problem_from_dict
 
 if TYPE_CHECKING:  # imported where the figure is made: see optlight.viz.layout
     from matplotlib.figure import Figure
@@ -253,24 +251,23 @@ class ClearField:
 
 
 def reachability_map(
-    setup: Setup,
+    reacher: Reacher,
     zenith_step_deg: float = 5.0,
     azimuth_step_deg: float = 10.0,
     *,
-    reacher: Reacher | None = None,
     progress: Callable[[int, int], None] | None = None,
 ) -> ReachabilityMap:
-    """IK success and manipulability over the setup's light cap, and with its environment the cells
-    the environment takes away (see the module docstring).
+    """IK success and manipulability over the light cap of the reacher's work cell, and with its
+    environment the cells the environment takes away (see the module docstring).
 
     Zenith from the sphere's ``zenith_min`` to ``zenith_max`` (both included) in steps of at most
     ``zenith_step_deg``; azimuth 0 … 360° (excluded) in steps of at most ``azimuth_step_deg``. Each
     cell is one :meth:`Reacher.attempt` (IK, then a clear posture), started from a reached neighbour;
     then a cell left blocked is tried again from each clear neighbour's angles, until no more become
-    clear. ``reacher``: the setup's, when one is built; ``progress(done, total)`` per cell.
+    clear. ``progress(done, total)`` per cell.
     """
-    robot, sphere = setup.robot, setup.sphere
-    reacher = reacher or Reacher(setup)
+    cell = reacher.cell
+    robot, sphere = cell.robot, cell.sphere
     zmin, zmax = np.rad2deg(sphere.zenith_min), np.rad2deg(sphere.zenith_max)
     n_z = int(np.ceil((zmax - zmin) / zenith_step_deg - 1e-9)) + 1
     n_a = int(np.ceil(360.0 / azimuth_step_deg - 1e-9))
@@ -298,7 +295,7 @@ def reachability_map(
         residual[i, j] = attempt.ik.residual
         success[i, j] = True
         theta[i, j] = attempt.ik.theta if attempt.theta is None else attempt.theta
-        if setup.environment is not None:
+        if cell.environment is not None:
             clearance[i, j] = attempt.clearance
             taken[i, j] = attempt.theta is None
         manip[i, j] = manipulability(KinematicState.compute(robot, theta[i, j]).jacobian)
@@ -338,101 +335,7 @@ def reachability_map(
         theta,
         residual,
         time.perf_counter() - t0,
-        environment=setup.environment is not None,
+        environment=cell.environment is not None,
         taken=taken,
         clearance=clearance,
-    )
-
-
-#: The base positions :func:`base_suggestion` tries: the problem's, moved in the horizontal plane by
-#: up to this much (m) ...
-BASE_SEARCH_M = 0.3
-#: ... in steps of this much (m).
-BASE_STEP_M = 0.1
-#: Of those, how many (most lights reached by the IK first) get a full reachability map.
-BASE_MAPPED = 3
-#: Steps (deg: zenith, azimuth) of those maps.
-BASE_MAP_STEP_DEG = (10.0, 20.0)
-
-
-@dataclass(frozen=True)
-class BaseSuggestion:
-    """A base position (m, world) from which the robot reaches ``clear`` of the ``cells`` cells of a
-    reachability map of the cap clear of the environment and the camera's view."""
-
-    position: tuple[float, float, float]
-    clear: int
-    cells: int
-
-    def __str__(self) -> str:
-        x, y, z = self.position
-        return (
-            f"[robot] base_position_m = [{x:.3f}, {y:.3f}, {z:.3f}] reaches {self.clear} of {self.cells} "
-            f"lights of the cap clear (reachability map at {BASE_MAP_STEP_DEG[0]:g}° × {BASE_MAP_STEP_DEG[1]:g}°)"
-        )
-
-
-def base_suggestion(setup: Setup) -> BaseSuggestion | None:
-    """Where to put the robot base so that it reaches lights of the cap clear, for a refusal to name.
-
-    The candidates are the problem's base position moved by (dx, dy) on a grid of step
-    :data:`BASE_STEP_M` within :data:`BASE_SEARCH_M` (height and orientation kept). Each is scored by
-    the lights of a coarse lattice of the cap (3 zenith rings × 12 azimuths) the generalized IK reaches
-    from θ_ref, with restarts (no environment: ~10 ms a light); the :data:`BASE_MAPPED` best, nearest
-    the problem's base first among equals, get the whole setup (environment and view included) and a
-    :func:`reachability_map` at :data:`BASE_MAP_STEP_DEG`. Returns the candidate with the most clear
-    cells, or None when none has one."""
-    from optlight.errors import OptlightError
-    from optlight.robot import generalized_ik
-    from optlight.robot.loading import load_robot
-
-    problem, sphere = setup.problem, setup.sphere
-    base = np.asarray(problem.robot.base_position_m, float)
-    zeniths = np.linspace(sphere.zenith_min, sphere.zenith_max, 3)
-    azimuths = np.arange(12) * (2.0 * np.pi / 12)
-    lights = [sphere.position(z, a) for z in zeniths for a in azimuths]
-    steps = np.arange(-BASE_SEARCH_M, BASE_SEARCH_M + 1e-9, BASE_STEP_M)
-    scored = []
-    for dx in steps:
-        for dy in steps:
-            shift = float(np.hypot(dx, dy))
-            if shift > BASE_SEARCH_M + 1e-9 or shift < 1e-9:
-                continue
-            moved = _with_base(problem, base + [dx, dy, 0.0])
-            robot = load_robot(moved)
-            reached = sum(
-                generalized_ik(robot, sphere, light, robot.theta_ref, **setup.ik).success for light in lights
-            )
-            if reached:
-                scored.append((-reached, shift, moved))
-    best: BaseSuggestion | None = None
-    for _, _, moved in sorted(scored, key=lambda s: s[:2])[:BASE_MAPPED]:
-        try:
-            reach = reachability_map(Setup.from_problem(moved), *BASE_MAP_STEP_DEG)
-        except OptlightError:  # a base the setup refuses (in the table, the start not clear): not a suggestion
-            continue
-        clear = int(reach.clear.sum())
-        if clear and (best is None or clear > best.clear):
-            position = tuple(round(float(v), 3) for v in moved.robot.base_position_m)
-            best = BaseSuggestion((position[0], position[1], position[2]), clear, int(reach.success.size))
-    return best
-
-
-def _with_base(problem: Problem, position: Array) -> Problem:
-    """``problem`` with ``[robot] base_position_m`` set to ``position`` (m, rounded to the mm a
-    problem file would hold), validated."""
-    data = problem.to_dict()
-    data["robot"]["base_position_m"] = [round(float(v), 3) for v in position]
-    return problem_from_dict(data, source=problem.source)
-
-
-def base_hint(setup: Setup) -> str:
-    """The part of a refusal that says where the base would work (:func:`base_suggestion`), or that
-    no base within :data:`BASE_SEARCH_M` of the problem's does."""
-    found = base_suggestion(setup)
-    if found is not None:
-        return f"move the robot base: {found}"
-    return (
-        f"no robot base within {BASE_SEARCH_M:g} m of [robot] base_position_m reaches a light of the cap clear "
-        "either: move the camera ([camera] position_m) or the object ([object] center_m), or widen [light_sphere]"
     )

@@ -5,14 +5,15 @@ per-azimuth search (:mod:`optlight.planning.lightsets`):
 
 - ``photometric_stereo`` / ``rti``: :func:`~optlight.planning.lightsets.design_light_set` of the
   problem's set cost (:func:`~optlight.planning.lightsets.set_cost_from_problem`, on the search
-  scene) over the allowed cap ``Cap.from_sphere(setup.sphere)`` (the camera's view taken out) and,
+  scene) over the allowed cap ``Cap.from_sphere(cell.sphere)`` (the camera's view taken out) and,
   with ``[lightset] design_over = "reachable"`` (the default), over the lights the robot reaches
   there clear of the environment and the camera's view: a reachability map of the cap first
   (:func:`~optlight.planning.reach.reachability_map`), whose smooth clear field
   (:class:`~optlight.planning.reach.ClearField`) is a row f(d_i) ≥ :data:`CLEAR_MARGIN` of the set
   NLP for every light. Designed on the cap alone, a set loses the lights the arm reaches only
   across the view cone, and their replacements are chosen one at a time;
-- ``grid``: the problem's grid mapped to the nearest lights on that cap
+- ``grid``: the problem's grid (:func:`~optlight.planning.lightsets.grid_from_problem`) mapped to
+  the nearest lights on that cap
   (:func:`~optlight.planning.lightsets.map_grid`), every replacement reported; with ``design_over =
   "reachable"`` the map is made too, for the placement's replacements (:class:`SetReplacement`).
 
@@ -40,22 +41,24 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.errors import UnreachableError
+from optlight.errors import OutOfReachError, UnreachableError
+from optlight.geometry import LightSphere
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
     Cap,
+    Grid,
     GridMapping,
     SetCost,
     angles_of,
     design_light_set,
-    grid_from_problem,
     map_grid,
-    set_cost_from_problem,
 )
 from optlight.planning.path import azimuth_order, shortest_open_tour
 from optlight.planning.policy import Attempt, Reacher, too_close_mm, why_moved
-from optlight.planning.reach import ClearField, ReachabilityMap, base_hint, reachability_map
-from optlight.setup import Setup
+from optlight.planning.reach import ClearField, ReachabilityMap, reachability_map
+from optlight.robot import Robot
+from optlight.spec import LandmarksSpec, LightSetSpec
+from optlight.workcell import ImageCosts, Workcell
 
 Array = NDArray[np.float64]
 
@@ -86,13 +89,20 @@ CLEAR_MARGIN = 0.5
 
 
 def landmarks_of_set(
-    setup: Setup, reacher: Reacher | None = None, progress: Callable[[int, int], None] | None = None
+    reacher: Reacher,
+    spec: LightSetSpec,
+    landmark_spec: LandmarksSpec,
+    wanted: Grid | SetCost,
+    file: str = "<inline>",
+    progress: Callable[[int, int], None] | None = None,
 ) -> tuple[LandmarkSet, SetDesign]:
-    """The problem's light set as landmarks (module docstring), and what was requested.
-    ``reacher``: the setup's, when one is built; ``progress(done, total)`` over the reachability
-    map's cells."""
+    """The light set ``spec`` (``[lightset]``) as landmarks (module docstring) on the lights of the
+    reacher's work cell, and what was requested: ``wanted`` is the grid to map (kind "grid") or the
+    set cost to design (on the search scene of the reacher's image costs); ``landmark_spec``
+    (``[landmarks]``) says whether a set may be smaller than asked; ``file`` the problem file its
+    errors name; ``progress(done, total)`` over the reachability map's cells."""
     t0 = time.perf_counter()
-    spec, cap = setup.problem.lightset, allowed_cap(setup)
+    cell, costs, cap = reacher.cell, reacher.costs, allowed_cap(reacher.cell)
     reach: ReachabilityMap | None = None
     field: ClearField | None = None
     cost: SetCost | None = None
@@ -101,27 +111,26 @@ def landmarks_of_set(
     notes: list[str] = []
     if spec.design_over == "reachable":
         step = spec.reach_step_deg
-        reach = reachability_map(setup, step, 2.0 * step, reacher=reacher, progress=progress)
+        reach = reachability_map(reacher, step, 2.0 * step, progress=progress)
         if not reach.clear.any():  # nothing to design over or replace with: say so before the NLPs
-            raise UnreachableError(
-                f"{setup.robot.name} reaches no light of the cap clear of the environment and the camera's "
+            raise OutOfReachError(
+                f"{cell.robot.name} reaches no light of the cap clear of the environment and the camera's "
                 f"view (reachability map, {reach.success.size} cells, {100 * reach.reachable_fraction:.0f} % "
-                f"reached by the IK); {base_hint(setup)}"
+                "reached by the IK)"
             )
         field = ClearField.from_map(reach)
-    if spec.kind == "grid":
-        wanted = grid_from_problem(setup.problem)
+    if isinstance(wanted, Grid):
         grid = map_grid(
             wanted,
             cap,
             spacing=math.radians(spec.candidate_spacing_deg),
             outside_cap=spec.grid_outside_cap,
-            file=str(setup.problem.source) if setup.problem.source else "<inline>",
+            file=file,
         )
         directions, requested = grid.achieved, grid.requested
         status: Literal["set", "grid"] = "grid"
     else:
-        cost = set_cost_from_problem(setup.problem, setup.search_scene, setup.search_objective)
+        cost = wanted
         allowed = None
         if field is not None:
             clear = field  # for the closure: never None
@@ -132,7 +141,7 @@ def landmarks_of_set(
         count, pool = spec.count, None
         if reach is not None and field is not None:
             pool = clear_lights(reach, field, cap)
-            count = fitting_count(setup, pool, reach)
+            count = fitting_count(cell.robot, spec, landmark_spec, pool, reach)
         result = design_light_set(cost, count, cap, starts=spec.starts, seed=spec.seed, allowed=allowed)
         if pool is not None and field is not None and not _on_clear_cells(result.directions, field):
             # IPOPT from uniform starts found no set inside a thin clear region: start on it
@@ -150,7 +159,7 @@ def landmarks_of_set(
     # which keeps neighbours on one IK branch as in the per-azimuth search
     by_azimuth = np.argsort(angles_of(directions)[1], kind="stable")
     directions, requested = directions[by_azimuth], requested[by_azimuth]
-    landmarks = tuple(_landmark(setup, i, d, status) for i, d in enumerate(directions))
+    landmarks = tuple(_landmark(cell.sphere, costs, i, d, status) for i, d in enumerate(directions))
     elapsed = time.perf_counter() - t0
     empty = np.zeros(0)
     found = LandmarkSet(
@@ -160,9 +169,9 @@ def landmarks_of_set(
         reference_label=f"light set ({spec.kind})",
         histograms=np.zeros((len(landmarks), 0)),
         sweep=CostGrid(empty, empty, np.zeros((0, 0))),
-        resolution=(setup.search_scene.camera.width, setup.search_scene.camera.height),
+        resolution=(costs.search_scene.camera.width, costs.search_scene.camera.height),
         time_s=elapsed,
-        view_zenith=setup.view_zenith,
+        view_zenith=cell.view_zenith,
         notes=(*_grid_notes(grid), *notes),
     )
     return found, SetDesign(spec.kind, requested, cost, requested_cost, grid, elapsed, reach, field)
@@ -177,19 +186,20 @@ def clear_lights(reach: ReachabilityMap, field: ClearField, cap: Cap) -> Array:
     return cells[field.numpy(cells) >= CLEAR_MARGIN]
 
 
-def fitting_count(setup: Setup, pool: Array, reach: ReachabilityMap) -> int:
-    """How many lights the set gets: ``[lightset] count``, or the number of the map's clear lights
-    ``pool`` when that is fewer (``[landmarks] allow_partial``; an :class:`UnreachableError` that
-    says how many fit otherwise)."""
-    spec = setup.problem.lightset
+def fitting_count(
+    robot: Robot, spec: LightSetSpec, landmark_spec: LandmarksSpec, pool: Array, reach: ReachabilityMap
+) -> int:
+    """How many lights the set gets: ``spec.count`` (``[lightset] count``), or the number of the
+    map's clear lights ``pool`` when that is fewer (``landmark_spec.allow_partial``; an
+    :class:`UnreachableError` naming ``robot`` that says how many fit otherwise)."""
     if len(pool) >= spec.count:
         return spec.count
     where = (
-        f"{setup.robot.name} reaches {len(pool)} distinct lights of the allowed cap clear of the environment, "
+        f"{robot.name} reaches {len(pool)} distinct lights of the allowed cap clear of the environment, "
         f"the camera's view and the beam (reachability map at {spec.reach_step_deg:g}°, "
         f"{int(reach.clear.sum())} clear cells) for a set of {spec.count}"
     )
-    if not setup.landmark_spec.allow_partial or len(pool) < 1:
+    if not landmark_spec.allow_partial or len(pool) < 1:
         raise UnreachableError(
             f"{where}: set [lightset] count = {len(pool)} (or less), or move the robot base ([robot] base_position_m)"
         )
@@ -226,19 +236,21 @@ def _onto_clear_cells(directions: Array, field: ClearField, pool: Array) -> tupl
     ]
 
 
-def allowed_cap(setup: Setup) -> Cap:
-    """The cap the set is designed on: the allowed sphere's (``setup.sphere``), its inner edge
+def allowed_cap(cell: Workcell) -> Cap:
+    """The cap the set is designed on: the allowed sphere's (``cell.sphere``), its inner edge
     :data:`VIEW_MARGIN` further from the camera's axis when the view limits it (a light designed
     exactly on that edge leaves the trajectory NLP's view rows no slack)."""
-    cap = Cap.from_sphere(setup.sphere)
-    if setup.view_zenith <= 0:
+    cap = Cap.from_sphere(cell.sphere)
+    if cell.view_zenith <= 0:
         return cap
     return Cap(min(cap.zenith_min + VIEW_MARGIN, 0.5 * (cap.zenith_min + cap.zenith_max)), cap.zenith_max)
 
 
-def _landmark(setup: Setup, index: int, direction: Array, status: Literal["set", "grid"]) -> Landmark:
-    """Light ``index`` of the set at ``direction`` (sphere frame) as a landmark."""
-    sphere = setup.sphere
+def _landmark(
+    sphere: LightSphere, costs: ImageCosts, index: int, direction: Array, status: Literal["set", "grid"]
+) -> Landmark:
+    """Light ``index`` of the set at ``direction`` (frame of ``sphere``) as a landmark, its cost the
+    image objective on the search scene of ``costs``."""
     position = sphere.center + sphere.radius * sphere.rotation @ direction
     zenith, azimuth = angles_of(direction)
     return Landmark(
@@ -246,7 +258,7 @@ def _landmark(setup: Setup, index: int, direction: Array, status: Literal["set",
         zenith=float(zenith),
         azimuth=float(azimuth),
         position=position,
-        cost=exact_cost(setup.search_scene, setup.search_objective, position),
+        cost=exact_cost(costs.search_scene, costs.search_objective, position),
         status=status,
         solver_status="",
         iterations=0,
@@ -264,9 +276,8 @@ def _grid_notes(grid: GridMapping | None) -> list[str]:
     ]
 
 
-def directions_of(setup: Setup, landmarks: Sequence[Landmark]) -> Array:
-    """Unit directions (M, 3), sphere frame, from O to the landmarks' positions."""
-    sphere = setup.sphere
+def directions_of(sphere: LightSphere, landmarks: Sequence[Landmark]) -> Array:
+    """Unit directions (M, 3), frame of ``sphere``, from its centre O to the landmarks' positions."""
     d = (np.array([lm.position for lm in landmarks]).reshape(-1, 3) - sphere.center) @ sphere.rotation
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
@@ -309,13 +320,19 @@ class SetReplacement:
     reached clear replaces it (status "placed")."""
 
     def __init__(
-        self, setup: Setup, design: SetDesign, landmarks: Sequence[Landmark], reacher: Reacher
+        self,
+        reacher: Reacher,
+        design: SetDesign,
+        landmarks: Sequence[Landmark],
+        spec: LightSetSpec,
+        landmark_spec: LandmarksSpec,
     ) -> None:
-        self.setup, self.design, self.reacher = setup, design, reacher
-        cap = allowed_cap(setup)
-        self.lattice = cap.lattice(cap.area_count(math.radians(setup.problem.lightset.candidate_spacing_deg)))
+        self.design, self.reacher, self.landmark_spec = design, reacher, landmark_spec
+        cell = reacher.cell
+        cap = allowed_cap(cell)
+        self.lattice = cap.lattice(cap.area_count(math.radians(spec.candidate_spacing_deg)))
         self.directions = dict(
-            zip((lm.index for lm in landmarks), directions_of(setup, landmarks), strict=True)
+            zip((lm.index for lm in landmarks), directions_of(cell.sphere, landmarks), strict=True)
         )
         reach, self.field = design.reach, design.field
         if reach is not None:
@@ -341,7 +358,7 @@ class SetReplacement:
     def __call__(
         self, lm: Landmark, attempts: Sequence[Attempt], previous: Array
     ) -> tuple[Landmark, Array, str] | str:
-        setup = self.setup
+        cell = self.reacher.cell
         here = self.directions[lm.index]
         for theta_map in self._map_postures(here):
             theta = self.reacher.attempt(lm.position, theta_map, restarts=False).theta
@@ -364,7 +381,7 @@ class SetReplacement:
         # see the others, and two unreachable yale_grid lights took the same replacement (64 captures,
         # 61 distinct lights)
         others = np.array([d for i, d in self.directions.items() if i != lm.index]).reshape(-1, 3)
-        apart = math.cos(math.radians(setup.landmark_spec.distinct_deg))
+        apart = math.cos(math.radians(self.landmark_spec.distinct_deg))
         nearest = nearest[(self.lattice[nearest] @ others.T).max(axis=1, initial=-1.0) < apart]
         scores = self._scores(lm.index, self.lattice[nearest])
         tried = nearest[np.argsort(scores, kind="stable")][:REPLACEMENT_TRIES]
@@ -376,7 +393,7 @@ class SetReplacement:
             [
                 lambda _: [(previous, False)],
                 lambda d: [(t, False) for t in self._map_postures(d, 1)],
-                lambda _: [(setup.robot.theta_ref, True)],
+                lambda _: [(cell.robot.theta_ref, True)],
             ],
         )
         if found is not None:
@@ -384,12 +401,14 @@ class SetReplacement:
             before = self._score_text(lm.index, here)
             self.directions[lm.index] = direction
             after = self._score_text(lm.index, direction)
-            light = replace(_landmark(setup, lm.index, direction, "set"), status="placed")
+            light = replace(
+                _landmark(cell.sphere, self.reacher.costs, lm.index, direction, "set"), status="placed"
+            )
             moved = math.degrees(math.acos(float(np.clip(direction @ here, -1.0, 1.0))))
             note = (
                 f"replaced by the light at zenith {math.degrees(light.zenith):.1f}°, azimuth "
                 f"{math.degrees(light.azimuth):.1f}°, {moved:.1f}° away, the reachable one that best keeps "
-                f"the set ({before} -> {after}) {why_moved(setup, attempts[0])}"
+                f"the set ({before} -> {after}) {why_moved(cell.robot, attempts[0])}"
             )
             return light, theta, note
         del self.directions[lm.index]  # dropped: out of the set the others are scored with
@@ -403,7 +422,7 @@ class SetReplacement:
     ) -> tuple[Array, Array] | None:
         """The first of ``candidates`` (K, 3, sphere frame; in order, pass by pass) the robot reaches
         clear from one of the (start, restarts) pairs ``pass(direction)`` gives, and its angles."""
-        sphere = self.setup.sphere
+        sphere = self.reacher.cell.sphere
         for starts in passes:
             for direction in candidates:
                 position = sphere.center + sphere.radius * sphere.rotation @ direction
@@ -423,12 +442,13 @@ class SetReplacement:
 
 
 def set_summary(
-    setup: Setup, design: SetDesign, placed: Sequence[Landmark], thetas: Array, order: ArrayLike
+    sphere: LightSphere, design: SetDesign, placed: Sequence[Landmark], thetas: Array, order: ArrayLike
 ) -> dict[str, Any]:
-    """Requested vs achieved, JSON-safe: counts, per-light move (deg) from the requested direction
+    """Requested vs achieved (directions in the frame of ``sphere``), JSON-safe: counts, per-light
+    move (deg) from the requested direction
     (placed lights by index), the set cost at the requested and the achieved directions (designed
     kinds), and the capture order's joint travel against azimuth order's."""
-    achieved = directions_of(setup, placed)
+    achieved = directions_of(sphere, placed)
     requested = design.requested[[lm.index for lm in placed]]
     # atan2 of |a×b| and a·b: arccos near 1 turns float rounding into micro-degrees of "move"
     moved = np.degrees(

@@ -138,10 +138,11 @@ def test_ur5_cap_is_clear_where_coal_says_so(tmp_path) -> None:
     """A UR5 cell (random cell 19: a mesh, an RTI set, a table and the camera's stand) whose every reached light the
     spheres of the housing and the first wrist link took away: its reachability map now has clear
     lights, and coal finds the map's postures there clear of everything and out of the view."""
+    from optlight.planning.policy import Reacher
     from optlight.planning.reach import reachability_map
 
     setup = Setup.from_problem(random_cell(19, tmp_path).problem)
-    reach = reachability_map(setup, 10.0, 20.0)
+    reach = reachability_map(Reacher(setup.workcell, setup.solver, setup.image_costs), 10.0, 20.0)
     assert reach.clear_fraction > 0.3
     assert setup.environment is not None
     thetas = reach.theta[reach.clear]
@@ -155,15 +156,14 @@ def test_a_cell_the_arm_cannot_reach_names_a_base_that_reaches_it(tmp_path) -> N
     nowhere (its wrist cannot turn the lamp far enough sideways): the refusal names a base position,
     and there, the generalized IK from random starts and coal's exact check (not the map the
     suggestion was made with) find clear lights."""
-    from optlight.planning.landmarks import find_landmarks
-    from optlight.planning.policy import place_landmarks
     from optlight.robot import generalized_ik
 
     cell = random_cell(4, tmp_path)
     asked = {**cell.data, "landmarks": {**cell.data["landmarks"], "allow_partial": False}}
-    setup = Setup.from_problem(problem_from_dict(asked))
     with pytest.raises(optlight.UnreachableError, match=r"move the robot base: \[robot\] base_position_m = \[") as e:
-        place_landmarks(setup, find_landmarks(setup).landmarks)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            optlight.solve(problem_from_dict(asked))
     named = re.search(r"base_position_m = (\[[^\]]*\]) reaches (\d+) of", str(e.value))
     assert named is not None and int(named.group(2)) >= 1
     data = {**asked, "robot": {**cell.data["robot"], "base_position_m": eval(named.group(1))}}
@@ -276,5 +276,5 @@ def test_a_window_with_one_capture_has_no_unfollowed_segment() -> None:
     position = setup.sphere.center + setup.sphere.radius * setup.sphere.direction(0.5, 1.0)
     path = build_path(setup.sphere, position[None], [0], np.radians(2.0))
     warm = np.repeat(setup.start[None], path.n_knots, axis=0)
-    out = unfollowed_segments(setup, path, warm, np.zeros(0, dtype=np.int64))
+    out = unfollowed_segments(setup.workcell, setup.trajectory_spec, path, warm, np.zeros(0, dtype=np.int64))
     assert out.shape == (0,) and out.dtype == bool

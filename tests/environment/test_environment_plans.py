@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import reacher_of, reduced_problem
 
 import optlight
 from optlight.environment import CAPTURE_SLACK, LIGHT, VIEW_CONE, Environment
@@ -21,12 +21,13 @@ from optlight.motion import Trajectory
 from optlight.planning.landmarks import Landmark
 from optlight.planning.nlp import knot_bounds, run, tangent_basis
 from optlight.planning.placement import CLEARANCE_TOL, NEAR_STEP, POSE_TOL, ClearPosture, LightPlacement
-from optlight.planning.policy import Reacher, place_landmarks
+from optlight.planning.policy import place_landmarks
 from optlight.planning.timing import time_parameterize
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
-from optlight.spec import Problem
+from optlight.spec import Problem, SolverSpec
 from optlight.verify import ENVIRONMENT_CHECKS, CheckResult, VerificationReport, verify_trajectory
+from optlight.workcell import Workcell
 
 #: Landmarks of the reduced collision problem (its file has 12).
 COLLISION_LANDMARKS = 8
@@ -166,7 +167,9 @@ def test_rows_left_out_that_the_solution_breaks_join_the_nlp(
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", counting)
     monkeypatch.setattr(active_rows, "ACTIVE_DISTANCE", -1.0)
     setup = constrained.setup
-    result = trajectory.optimize_knots(setup, constrained.path, constrained.knot_ik)
+    result = trajectory.optimize_knots(
+        setup.workcell, setup.trajectory_spec, setup.solver, constrained.path, constrained.knot_ik
+    )
     assert len(solves) >= 2 and solves[0] == 0 and 0 < solves[1] < env_rows(constrained)
     env = setup.environment
     assert env is not None
@@ -188,25 +191,29 @@ def test_the_transfer_nlp_with_the_rows_that_can_bind_finds_the_all_rows_transfe
     sizes: list[int] = []
     real = transfer._transfer_nlp
 
-    def counting(setup: Setup, rows: object, *args: object) -> tuple[np.ndarray | None, str]:
+    def counting(
+        cell: Workcell, solver: SolverSpec, rows: object, *args: object
+    ) -> tuple[np.ndarray | None, str]:
         sizes.append(rows.size1_out(0))  # type: ignore[attr-defined]
-        return real(setup, rows, *args)  # type: ignore[arg-type]
+        return real(cell, solver, rows, *args)  # type: ignore[arg-type]
 
     monkeypatch.setattr(transfer, "_transfer_nlp", counting)
     setup = constrained.setup
     env = setup.environment
     assert env is not None
     last = constrained.nlp.theta[-1]
-    active = trajectory.plan_transfer(setup, last, setup.start)
+    active = trajectory.plan_transfer(setup.workcell, setup.solver, last, setup.start)
     assert sizes, "the transfer NLP did not run"
     near_row_count = sizes[-1]
     monkeypatch.setattr(active_rows, "ACTIVE_DISTANCE", np.inf)
-    every = trajectory.plan_transfer(setup, last, setup.start)
+    every = trajectory.plan_transfer(setup.workcell, setup.solver, last, setup.start)
     assert near_row_count < sizes[-1]
     line_worst = min(env.sphere_clearance(setup.robot, t)[0].min() for t in np.linspace(last, setup.start, 20))
     assert line_worst < trajectory.TRANSFER_PADDING
     np.testing.assert_allclose(active, every, atol=1e-4)  # IPOPT's tolerance apart
-    assert trajectory.knot_cost(setup, active) == pytest.approx(trajectory.knot_cost(setup, every), rel=1e-6)
+    assert trajectory.knot_cost(setup.workcell, active) == pytest.approx(
+        trajectory.knot_cost(setup.workcell, every), rel=1e-6
+    )
     worst = min(env.sphere_clearance(setup.robot, theta)[0].min() for theta in active[1:-1])
     assert worst >= trajectory.TRANSFER_PADDING - 1e-6
 
@@ -318,7 +325,9 @@ def test_a_clear_posture_at_a_relaxed_joint_bound_is_kept(small_setup: Setup) ->
     start = np.array([1.0897953090108847, -1.6188833744143365, 0.8533831312972046, -3.071329036573146,
                       -0.5881765127376188, 1.6537322689961658, 0.7788820106584369])
     assert small_setup.environment is not None
-    found = ClearPosture(small_setup, small_setup.environment).solve(light, start)
+    found = ClearPosture(small_setup.workcell, small_setup.environment, small_setup.solver).solve(
+        light, start
+    )
     assert found is not None
     theta, row, _ = found
     lower, upper = knot_bounds(small_setup.robot)
@@ -348,7 +357,7 @@ def test_a_clear_posture_warm_started_at_the_ik_angles_is_the_one_from_the_ancho
         return solved
 
     monkeypatch.setattr(clear_posture, "run", counted)
-    posture = ClearPosture(small_setup, env)
+    posture = ClearPosture(small_setup.workcell, env, small_setup.solver)
     cold = posture.solve(light, robot.theta_ref)
     cold_iterations = sum(iterations)
     iterations.clear()
@@ -370,14 +379,16 @@ def test_a_clear_posture_near_its_anchor_starts_from_the_small_barrier(small_set
     zenith = sphere.zenith_min
     first = sphere.position(zenith, math.radians(60.0))
     start = generalized_ik(robot, sphere, first, robot.theta_ref, restarts=False, **small_setup.ik)
-    previous = ClearPosture(small_setup, env).solve(first, robot.theta_ref, warm=start.theta)
+    previous = ClearPosture(small_setup.workcell, env, small_setup.solver).solve(
+        first, robot.theta_ref, warm=start.theta
+    )
     assert previous is not None
     light = sphere.position(zenith, math.radians(70.0))
     ik = generalized_ik(robot, sphere, light, previous[0], restarts=False, **small_setup.ik)
     assert ik.success and np.abs(ik.theta - previous[0]).max() <= NEAR_STEP
     assert env.worst_sphere_row(robot, ik.theta)[0] < CAPTURE_SLACK  # the IK's arm in the view
 
-    posture = ClearPosture(small_setup, env)
+    posture = ClearPosture(small_setup.workcell, env, small_setup.solver)
     found = posture.solve(light, previous[0], warm=ik.theta)
     assert found is not None and list(posture._solvers) == [(None, True)]
     small = posture._solver(None, True)[0].stats()["iter_count"]
@@ -390,7 +401,7 @@ def test_a_clear_posture_near_its_anchor_starts_from_the_small_barrier(small_set
     # to IPOPT's tolerance: the last joint turns the light about its axis, which only the cost settles
     np.testing.assert_allclose(found[0], np.clip(default.x, lower, upper), atol=1e-5)
 
-    far = ClearPosture(small_setup, env)
+    far = ClearPosture(small_setup.workcell, env, small_setup.solver)
     far.solve(light, robot.theta_ref, warm=ik.theta + NEAR_STEP + 0.1)
     assert list(far._solvers) == [(None, False)]
 
@@ -408,12 +419,14 @@ def test_among_obstacles_the_small_barrier_only_restores_the_view() -> None:
     def step(azimuth_deg: float) -> tuple[ClearPosture, np.ndarray, np.ndarray, np.ndarray, tuple]:
         first = sphere.position(sphere.zenith_min, math.radians(azimuth_deg))
         start = generalized_ik(robot, sphere, first, robot.theta_ref, restarts=False, **setup.ik)
-        previous = ClearPosture(setup, env).solve(first, robot.theta_ref, warm=start.theta)
+        previous = ClearPosture(setup.workcell, env, setup.solver).solve(
+            first, robot.theta_ref, warm=start.theta
+        )
         assert previous is not None
         light = sphere.position(sphere.zenith_min, math.radians(azimuth_deg + 10.0))
         ik = generalized_ik(robot, sphere, light, previous[0], restarts=False, **setup.ik)
         assert ik.success and np.abs(ik.theta - previous[0]).max() <= NEAR_STEP
-        posture = ClearPosture(setup, env)
+        posture = ClearPosture(setup.workcell, env, setup.solver)
         return posture, previous[0], light, ik.theta, posture.solve(light, previous[0], warm=ik.theta)
 
     posture, anchor, light, warm, found = step(120.0)
@@ -421,7 +434,7 @@ def test_among_obstacles_the_small_barrier_only_restores_the_view() -> None:
     assert clearance.min() >= CAPTURE_SLACK > view.min()  # the case: only the view to restore
     assert found is not None and {small for _, small in posture._solvers} == {True}
     t1, t2 = tangent_basis((light - sphere.center) / sphere.radius)
-    default = ClearPosture(setup, env)
+    default = ClearPosture(setup.workcell, env, setup.solver)
     nlp, lbg, ubg = default._solver(None, False)  # every row, from the default barrier
     args = {"x0": warm, "p": np.r_[anchor, light, t1, t2], "lbx": lower, "ubx": upper, "lbg": lbg, "ubg": ubg}
     every = run(nlp, args)
@@ -442,7 +455,7 @@ def test_a_clear_posture_from_the_near_rows_is_the_one_from_every_row() -> None:
     assert env is not None
     ik = generalized_ik(robot, sphere, (math.radians(30.0), 0.0), robot.theta_ref)
     light = sphere.position(math.radians(30.0), 0.0)
-    posture = ClearPosture(setup, env)
+    posture = ClearPosture(setup.workcell, env, setup.solver)
     found = posture.solve(light, ik.theta)
     assert found is not None
     row_sets = [key for key, _ in posture._solvers if key is not None]
@@ -470,7 +483,7 @@ def test_a_placement_from_the_near_rows_is_the_one_from_every_row() -> None:
     assert env is not None
     ik = generalized_ik(robot, sphere, (math.radians(30.0), 0.0), robot.theta_ref)
     assert env.worst_sphere_row(robot, ik.theta)[0] < -0.02  # the case: the arm in the wall
-    placement = LightPlacement(setup)
+    placement = LightPlacement(setup.workcell, setup.image_costs, setup.solver)
     p = np.r_[0.0, placement.search.visibility(robot.light_pose(ik.theta)[0])]
     lbg, ubg = placement._bounds["fixed"]
     near = placement._run(ik.theta, p, lbg, ubg)
@@ -499,14 +512,14 @@ def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     setup = Setup.from_problem(reduced("table_wall"))
     robot, scene, env = setup.robot, setup.scene, setup.environment
     assert env is not None
-    placement = LightPlacement(setup)
+    placement = LightPlacement(setup.workcell, setup.image_costs, setup.solver)
     assert placement.environment is env
 
     ik = generalized_ik(robot, scene.sphere, (math.radians(30.0), 0.0), robot.theta_ref)
     row, label = env.worst_sphere_row(robot, ik.theta)
     assert ik.success and row < -0.02 and label.endswith("↔ wall")
     light = scene.sphere.position(math.radians(30.0), 0.0)
-    found = ClearPosture(setup, env).solve(light, ik.theta)
+    found = ClearPosture(setup.workcell, env, setup.solver).solve(light, ik.theta)
     assert found is not None
     theta, row, label = found
     assert row >= -CLEARANCE_TOL and env.worst_sphere_row(robot, theta) == (row, label)
@@ -522,7 +535,7 @@ def test_clear_postures_and_placements_or_the_landmark_is_named() -> None:
     zenith = math.radians(30.0)
     blocked = Landmark(0, zenith, azimuth, scene.sphere.position(zenith, azimuth), 0.0, "refined", "", 0, 0.0)
     with pytest.raises(UnreachableError, match="blocked for panda") as error:
-        place_landmarks(setup, [blocked])
+        place_landmarks(reacher_of(setup), setup.landmark_spec, [blocked])
     message = str(error.value)
     assert "azimuth 157.5°" in message and f"↔ {VIEW_CONE}" in message
     assert "nor is any light on its azimuth clear of the environment" in message
@@ -536,7 +549,7 @@ def test_an_ik_posture_on_the_edge_of_a_row_is_not_a_capture_posture(small_setup
     robot, env = small_setup.robot, small_setup.environment
     assert env is not None
     light = small_setup.sphere.position(math.radians(22.0), math.radians(320.0))
-    attempt = Reacher(small_setup).attempt(light, robot.theta_ref)
+    attempt = reacher_of(small_setup).attempt(light, robot.theta_ref)
     row, _ = env.worst_sphere_row(robot, attempt.ik.theta)
     assert attempt.ik.success and 0.0 <= row < CAPTURE_SLACK  # the case: clear, but on the edge
     assert attempt.theta is not None

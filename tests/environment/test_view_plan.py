@@ -8,12 +8,12 @@ import math
 
 import numpy as np
 import pytest
-from conftest import REACH_ONLY, reduced_problem
+from conftest import REACH_ONLY, reduced_problem, search_landmarks
 
 import optlight
 from optlight.environment import CAPTURE_SLACK
 from optlight.errors import ProblemError
-from optlight.planning.landmarks import Landmark, distinct_landmarks, find_landmarks
+from optlight.planning.landmarks import Landmark, distinct_landmarks
 from optlight.setup import Setup, housing_clearance, housing_sphere_clearance
 
 
@@ -62,7 +62,7 @@ def test_the_view_takes_away_the_lights_in_front_of_the_lens(setup: Setup) -> No
 
 
 def test_landmarks_stay_out_of_the_view_and_say_where_they_moved(setup: Setup) -> None:
-    landmarks = find_landmarks(setup)
+    landmarks = search_landmarks(setup)
     assert min(lm.zenith for lm in landmarks.landmarks) >= setup.view_zenith - 1e-12
     # the default's reference light (zenith 10°) is in the view: the azimuths whose best light was
     # there are named, with the clear landmark that replaces it

@@ -11,12 +11,12 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import reduced_problem, search_landmarks
 
 from optlight.errors import ProblemError
 from optlight.objectives import Objective
 from optlight.planning import landmarks as lm_module
-from optlight.planning.landmarks import exact_cost, find_landmarks, local_minima, zenith_grid
+from optlight.planning.landmarks import exact_cost, local_minima, zenith_grid
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -52,7 +52,7 @@ def scene(setup: Setup) -> Scene:
 
 @pytest.fixture(scope="module")
 def result(setup: Setup) -> lm_module.LandmarkSet:
-    return find_landmarks(setup)
+    return search_landmarks(setup)
 
 
 def test_distance_vanishes_at_the_reference_light(problem: Problem, scene: Scene) -> None:
@@ -111,7 +111,10 @@ def test_every_sweep_sample_is_the_cost_of_its_own_light(setup: Setup, result: l
     np.testing.assert_allclose(grid.cost, one_by_one(grid.zenith, grid.azimuth), rtol=1e-12, atol=1e-16)
     zenith, azimuth = grid.zenith[::3], np.radians([10.0, 100.0, 250.0])
     np.testing.assert_allclose(
-        lm_module.sweep_costs(search, objective, zenith, azimuth), one_by_one(zenith, azimuth), rtol=1e-12, atol=1e-16
+        lm_module.sweep_costs(search, objective, zenith, azimuth),
+        one_by_one(zenith, azimuth),
+        rtol=1e-12,
+        atol=1e-16,
     )
 
 
@@ -126,11 +129,13 @@ def test_azimuth_mode_builds_no_nlp_and_reports_progress(problem: Problem, monke
     monkeypatch.setattr(ca, "nlpsol", counting)
     calls: list[tuple[int, int]] = []
     small = small_problem(count=3, seeds=2)
-    out = find_landmarks(Setup.from_problem(small), progress=lambda done, total: calls.append((done, total)))
+    out = search_landmarks(
+        Setup.from_problem(small), progress=lambda done, total: calls.append((done, total))
+    )
     assert built == []  # the zenith search is a 1-D Brent search on the NumPy objective
     assert calls == [(1, 3), (2, 3), (3, 3)]
     assert out.iterations > 0  # objective evaluations of the zenith searches
-    free = find_landmarks(Setup.from_problem(small_problem(mode="free", count=2, min_separation_deg=20.0)))
+    free = search_landmarks(Setup.from_problem(small_problem(mode="free", count=2, min_separation_deg=20.0)))
     assert built == ["cap_refiner"] and len(free) == 2  # free mode's 2-D NLP, built once for both
 
 
@@ -154,11 +159,11 @@ def test_a_seed_on_the_views_boundary_the_objective_rises_from_is_not_searched(
     """The default face's landmarks lie on the view's boundary, the smallest allowed zenith: each
     azimuth's seed there is an end of the allowed zeniths the objective rises from, so one
     evaluation inside replaces its zenith search, and the landmarks are the ones the searches give."""
-    probed = find_landmarks(small_setup)
+    probed = search_landmarks(small_setup)
     lo = small_setup.sphere.zenith_min
     assert all(lm.zenith == lo for lm in probed.landmarks)  # the case
     monkeypatch.setattr(lm_module.ZenithSearch, "rises_from_end", lambda *args: False)
-    searched = find_landmarks(small_setup)
+    searched = search_landmarks(small_setup)
     assert [(lm.zenith, lm.azimuth, lm.cost, lm.status) for lm in probed.landmarks] == [
         (lm.zenith, lm.azimuth, lm.cost, lm.status) for lm in searched.landmarks
     ]
@@ -188,7 +193,7 @@ def test_the_kept_visibility_is_each_landmarks_own_shadow_rays(result: lm_module
 
 def test_free_mode_keeps_the_separation(scene: Scene) -> None:
     free = small_problem(mode="free", count=4, min_separation_deg=8.0, sweep_step_deg=6.0, resolution=32)
-    out = find_landmarks(Setup.from_problem(free))
+    out = search_landmarks(Setup.from_problem(free))
     assert len(out) == 4
     np.testing.assert_array_equal(out.visibility(scene.gbuffer.size), scene.visibility(out.positions))
     d = (out.positions - scene.sphere.center) / scene.sphere.radius
@@ -203,7 +208,7 @@ def test_free_mode_keeps_the_separation(scene: Scene) -> None:
 def test_free_mode_too_many_landmarks_is_a_problem_error() -> None:
     crowded = small_problem(mode="free", count=6, min_separation_deg=60.0, sweep_step_deg=10.0, resolution=24)
     with pytest.raises(ProblemError, match="landmarks.count"):
-        find_landmarks(Setup.from_problem(crowded))
+        search_landmarks(Setup.from_problem(crowded))
 
 
 def test_helpers() -> None:

@@ -13,17 +13,17 @@ from typing import Any
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import REACH_ONLY, reduced_problem
+from conftest import REACH_ONLY, reacher_of, reduced_problem, search_landmarks
 
 import optlight
 from optlight import pipeline as pipeline_module
 from optlight.errors import UnreachableError
 from optlight.geometry import h_residual
 from optlight.pipeline import PlacementAhead
-from optlight.planning.landmarks import LandmarkSet, exact_cost, find_landmarks
+from optlight.planning.landmarks import LandmarkSet, exact_cost
 from optlight.planning.placement import LightPlacement, PlacementResult
 from optlight.planning.placement import light as placement_module
-from optlight.planning.policy import PlacementChain, Reacher, place_landmarks
+from optlight.planning.policy import PlacementChain, place_landmarks
 from optlight.robot import Robot, generalized_ik
 from optlight.setup import Setup
 from optlight.spec import Problem
@@ -50,8 +50,8 @@ class Case:
         self.scene = self.setup.scene
         self.sphere = self.setup.sphere
         self.robot: Robot = self.setup.robot
-        self.landmarks: LandmarkSet = find_landmarks(self.setup)
-        self.placement = LightPlacement(self.setup)
+        self.landmarks: LandmarkSet = search_landmarks(self.setup)
+        self.placement = LightPlacement(self.setup.workcell, self.setup.image_costs, self.setup.solver)
 
 
 @pytest.fixture(scope="module")
@@ -126,7 +126,7 @@ def test_nlp_built_once(default: Case, monkeypatch: pytest.MonkeyPatch) -> None:
         return real(*args, **kwargs)
 
     monkeypatch.setattr(placement_module.ca, "nlpsol", counting)
-    placement = LightPlacement(default.setup)
+    placement = LightPlacement(default.setup.workcell, default.setup.image_costs, default.setup.solver)
     theta = default.robot.theta_ref
     for azimuth in (0.0, math.pi / 2, None, 3 * math.pi / 2):
         result = placement.solve(azimuth, theta)
@@ -137,7 +137,8 @@ def test_nlp_built_once(default: Case, monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_search_resolution_is_the_landmark_search_one() -> None:
     problem = small_problem(count=1, landmarks={"resolution": 40})
-    placement = LightPlacement(Setup.from_problem(problem))
+    built = Setup.from_problem(problem)
+    placement = LightPlacement(built.workcell, built.image_costs, built.solver)
     assert (placement.search.camera.width, placement.search.camera.height) == (40, 40)
     assert (placement.scene.camera.width, placement.scene.camera.height) == (64, 64)
 
@@ -197,7 +198,7 @@ def test_unreachable_landmark_moves_along_its_azimuth(low: Case) -> None:
         lm = landmarks[j]
         assert not generalized_ik(robot, sphere, lm.position, robot.theta_ref).success
         assert generalized_ik(robot, sphere, (lm.zenith / 2, lm.azimuth), robot.theta_ref).success
-    placed = place_landmarks(low.setup, landmarks)
+    placed = place_landmarks(reacher_of(low.setup), low.setup.landmark_spec, landmarks)
     kept, thetas, notes = placed.landmarks, placed.thetas, placed.warnings
     assert [lm.index for lm in kept] == list(range(len(landmarks)))
     assert [lm.index for lm in kept if lm.status == "placed"] == moved
@@ -231,7 +232,7 @@ def test_the_azimuth_placement_tries_the_previous_capture_last(low: Case) -> Non
     the IK missed the light from both starts, and from its angles, 8 cm off the sphere, IPOPT found
     the azimuth infeasible), it starts from the previous capture's clear angles; those failures are
     imposed here on the first two starts of landmark 1, which is out of reach."""
-    reacher = Reacher(low.setup)
+    reacher = reacher_of(low.setup)
     placement, starts = reacher.placement, []
     solve = placement.solve
 
@@ -242,7 +243,7 @@ def test_the_azimuth_placement_tries_the_previous_capture_last(low: Case) -> Non
 
     placement.solve = failing_first_two  # type: ignore[method-assign]
     first, lm = low.landmarks.landmarks[0], low.landmarks.landmarks[1]
-    placed = place_landmarks(low.setup, [first, lm], reacher)
+    placed = place_landmarks(reacher, low.setup.landmark_spec, [first, lm])
     assert len(starts) == 3
     # the third start holds the previous capture's light (its angles, before the placement's follow-back)
     np.testing.assert_allclose(low.robot.light_pose(starts[2])[0], first.position, atol=1e-6)
@@ -257,7 +258,7 @@ def test_a_placement_on_the_reach_boundary_is_tried_from_every_start(low: Case) 
     where the first start's branch runs out of reach may be a local one (a camera-loop re-plan: 51.9°
     from one start, its arm in the light's beam; 26.4° and a 3.5× lower cost from another). The
     azimuth placement then solves from every start and keeps the cheapest success."""
-    reacher = Reacher(low.setup)
+    reacher = reacher_of(low.setup)
     placement, results = reacher.placement, []
     solve = placement.solve
 
@@ -267,7 +268,7 @@ def test_a_placement_on_the_reach_boundary_is_tried_from_every_start(low: Case) 
 
     placement.solve = recorded  # type: ignore[method-assign]
     first, lm = low.landmarks.landmarks[0], low.landmarks.landmarks[1]
-    placed = place_landmarks(low.setup, [first, lm], reacher)
+    placed = place_landmarks(reacher, low.setup.landmark_spec, [first, lm])
     assert results[0].success and results[0].on_boundary
     assert len(results) == 3  # both IK attempts' angles, then the previous capture's
     cheapest = min((r for r in results if r.success), key=lambda r: r.cost)
@@ -304,7 +305,7 @@ def placed_in_threads(monkeypatch: pytest.MonkeyPatch, threads: int) -> set[str]
 
 
 def offered_and_placed(case: Case, offered: Any, captures: Any) -> Any:
-    with PlacementAhead(case.setup, Reacher(case.setup)) as ahead:
+    with PlacementAhead(reacher_of(case.setup), case.setup.landmark_spec) as ahead:
         for lm in offered:
             ahead.offer(lm)
         return ahead.placement(captures)
@@ -320,7 +321,7 @@ def test_the_placement_ahead_places_in_its_thread_what_place_landmarks_places(
     one thread nothing runs ahead."""
     landmarks = low.landmarks.landmarks
     names = placed_in_threads(monkeypatch, 2)
-    expected = place_landmarks(low.setup, landmarks)
+    expected = place_landmarks(reacher_of(low.setup), low.setup.landmark_spec, landmarks)
     assert sum(lm.status == "placed" for lm in expected.landmarks) == 2
     for offered, captures, threads in [
         (landmarks, landmarks, {"optlight_placement"}),
@@ -328,7 +329,11 @@ def test_the_placement_ahead_places_in_its_thread_what_place_landmarks_places(
     ]:
         names.clear()
         got = offered_and_placed(low, offered, captures)
-        want = expected if len(captures) == len(landmarks) else place_landmarks(low.setup, captures)
+        want = (
+            expected
+            if len(captures) == len(landmarks)
+            else place_landmarks(reacher_of(low.setup), low.setup.landmark_spec, captures)
+        )
         assert names == threads
         assert [(lm.index, lm.zenith, lm.status) for lm in got.landmarks] == [
             (lm.index, lm.zenith, lm.status) for lm in want.landmarks
@@ -353,7 +358,7 @@ def test_azimuth_out_of_reach_is_named_or_dropped(monkeypatch: pytest.MonkeyPatc
         match=r"landmark 0 \(zenith 20\.0°, azimuth 0\.0°\) is out of reach of panda: .*; nor is any light "
         r"on its azimuth within zenith 20\.0–60\.0° \(placement NLP: ",
     ) as sequential:
-        place_landmarks(case.setup, landmarks)
+        place_landmarks(reacher_of(case.setup), case.setup.landmark_spec, landmarks)
     names = placed_in_threads(monkeypatch, 2)
     with pytest.raises(UnreachableError) as ahead:
         offered_and_placed(case, landmarks, landmarks)
@@ -364,7 +369,8 @@ def test_azimuth_out_of_reach_is_named_or_dropped(monkeypatch: pytest.MonkeyPatc
         light_sphere={"zenith_min_deg": 20.0},
         landmarks={"allow_partial": True},
     )
-    placed = place_landmarks(Setup.from_problem(partial), landmarks)
+    dropping = Setup.from_problem(partial)
+    placed = place_landmarks(reacher_of(dropping), dropping.landmark_spec, landmarks)
     kept, thetas, notes = placed.landmarks, placed.thetas, placed.warnings
     assert [lm.index for lm in kept] == [3] and thetas.shape == (1, case.robot.n)
     assert [note.split(" (")[0] for note in notes] == [
@@ -388,7 +394,7 @@ def test_captures_keep_the_margins_where_they_can_and_the_rows_where_they_cannot
 
     def placed(slack: float) -> PlacementResult:
         monkeypatch.setattr(placement_module, "CAPTURE_SLACK", slack)
-        result = LightPlacement(setup).solve(azimuth, start.theta)
+        result = LightPlacement(setup.workcell, setup.image_costs, setup.solver).solve(azimuth, start.theta)
         assert result.success, result.message
         assert abs(result.azimuth - azimuth) < 1e-6
         return result
@@ -424,7 +430,7 @@ def test_a_landmark_out_of_reach_is_placed_from_a_clear_posture_found_along_its_
         Landmark(i, z, a, sphere.position(z, a), 0.01, "refined", "", 0, 0.0)
         for i, (z, a) in enumerate(zip(zeniths, azimuths, strict=True))
     ]
-    placed = place_landmarks(setup, landmarks)
+    placed = place_landmarks(reacher_of(setup), setup.landmark_spec, landmarks)
     assert [lm.index for lm in placed.landmarks] == list(range(8))
     fourth = placed.landmarks[4]
     assert fourth.status == "placed" and fourth.azimuth == pytest.approx(np.pi)

@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import reduced_problem
+from conftest import reacher_of, reduced_problem
 
 import optlight
 from optlight.environment.view import view_check_for
 from optlight.errors import UnreachableError
+from optlight.pipeline import wanted_lights
 from optlight.planning.landmarks import LandmarkSet
 from optlight.planning.set_landmarks import (
     CLEAR_MARGIN,
@@ -110,7 +111,8 @@ def _rti_ur10(**lightset: object) -> optlight.Problem:
 @pytest.fixture(scope="module")
 def rti_design() -> tuple[Setup, LandmarkSet, SetDesign]:
     setup = Setup.from_problem(_rti_ur10())
-    return (setup, *landmarks_of_set(setup))
+    wanted = wanted_lights(setup)
+    return (setup, *landmarks_of_set(reacher_of(setup), setup.lightset_spec, setup.landmark_spec, wanted))
 
 
 @pytest.mark.slow
@@ -121,7 +123,7 @@ def test_a_set_over_the_reachable_lights_is_designed_on_the_clear_cells(
     the map found nothing clear (the placement then dropped them)."""
     setup, found, design = rti_design
     assert design.reach is not None and design.field is not None
-    directions = directions_of(setup, found.landmarks)
+    directions = directions_of(setup.sphere, found.landmarks)
     assert len(directions) == 12
     assert (design.field.numpy(directions) >= CLEAR_MARGIN - 1e-6).all()
     # each light is within a map step of a cell the map found clear (the field only smooths them)
@@ -136,13 +138,16 @@ def test_too_few_clear_lights_for_the_set_says_how_many_fit(
 ) -> None:
     setup, _, design = rti_design
     assert design.reach is not None and design.field is not None
-    pool = clear_lights(design.reach, design.field, allowed_cap(setup))
+    pool = clear_lights(design.reach, design.field, allowed_cap(setup.workcell))
     assert 12 <= len(pool) < 400
     many = Setup.from_problem(_rti_ur10(count=400))
     with pytest.raises(UnreachableError, match=rf"set \[lightset\] count = {len(pool)} \(or less\)"):
-        fitting_count(many, pool, design.reach)
-    partial = optlight.problem_from_dict({**_rti_ur10(count=400).to_dict(), "landmarks": {"allow_partial": True}})
-    assert fitting_count(Setup.from_problem(partial), pool, design.reach) == len(pool)
+        fitting_count(many.robot, many.lightset_spec, many.landmark_spec, pool, design.reach)
+    partial = optlight.problem_from_dict(
+        {**_rti_ur10(count=400).to_dict(), "landmarks": {"allow_partial": True}}
+    )
+    fits = Setup.from_problem(partial)
+    assert fitting_count(fits.robot, fits.lightset_spec, fits.landmark_spec, pool, design.reach) == len(pool)
 
 
 def _zigzag_knots(setup: Setup, amplitude: float) -> np.ndarray:
@@ -205,14 +210,14 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
     real_path, real_knots = pipeline.capture_path, pipeline.optimize_knots
     paths: list[int] = []  # captures of each path the pipeline plans
 
-    def counted_path(setup, positions, thetas):  # type: ignore[no-untyped-def]
+    def counted_path(sphere, spec, positions, thetas):  # type: ignore[no-untyped-def]
         paths.append(len(positions))
-        return real_path(setup, positions, thetas)
+        return real_path(sphere, spec, positions, thetas)
 
-    def fails_with_every_capture(setup, path, warm, fixed_start, **kwargs):  # type: ignore[no-untyped-def]
+    def fails_with_every_capture(cell, spec, solver, path, warm, fixed_start, **kwargs):  # type: ignore[no-untyped-def]
         if len(paths) == 1:  # the first path, through every placed capture
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
-        return real_knots(setup, path, warm, fixed_start, **kwargs)
+        return real_knots(cell, spec, solver, path, warm, fixed_start, **kwargs)
 
     monkeypatch.setattr(pipeline, "capture_path", counted_path)
     monkeypatch.setattr(pipeline, "optimize_knots", fails_with_every_capture)
@@ -220,7 +225,10 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
         optlight.solve(small_default)
     paths.clear()
     partial = optlight.problem_from_dict(
-        {**small_default.to_dict(), "landmarks": {**small_default.to_dict()["landmarks"], "allow_partial": True}}
+        {
+            **small_default.to_dict(),
+            "landmarks": {**small_default.to_dict()["landmarks"], "allow_partial": True},
+        }
     )
     with pytest.warns(UserWarning, match=r"dropped landmark \d+ .*capture \d+ of the visiting order: the "):
         plan = optlight.solve(partial)
@@ -247,7 +255,7 @@ def test_knots_far_apart_on_the_sphere_get_knots_on_their_arc(small_setup: Setup
     rotations = np.array([robot.light_pose(q)[1] for q in knots])
     directions = (positions - sphere.center) / sphere.radius
     path = LightPath(directions, positions, rotations, np.arange(2), np.array([0, 1]), np.zeros(1, bool))
-    planned_path, planned = knots_on_path(small_setup, path, knots)
+    planned_path, planned = knots_on_path(small_setup.workcell, path, knots)
     assert len(planned) > 2 and planned_path.landmark_knots.tolist() == [0, len(planned) - 1]
     np.testing.assert_array_equal(planned[[0, -1]], knots)
     lights = robot.light_positions(planned)

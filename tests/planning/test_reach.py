@@ -9,12 +9,11 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 import pytest
-from conftest import REACH_ONLY, reduced_problem
+from conftest import REACH_ONLY, reacher_of, reduced_problem
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from optlight.geometry import LightSphere, direction_in_sphere_frame
 from optlight.planning.placement import CLEARANCE_TOL, POSE_TOL
-from optlight.planning.policy import Reacher
 from optlight.planning.reach import ClearField, ReachabilityMap, reachability_map
 from optlight.robot import load_robot
 from optlight.setup import Setup
@@ -23,7 +22,9 @@ from optlight.spec import load_problem, problem_from_dict
 
 def test_the_paper_layout_cap_is_fully_reachable_by_the_panda(tmp_path: Path) -> None:
     problem = reduced_problem(**REACH_ONLY)
-    reach = reachability_map(Setup.from_problem(problem), zenith_step_deg=10.0, azimuth_step_deg=30.0)
+    reach = reachability_map(
+        reacher_of(Setup.from_problem(problem)), zenith_step_deg=10.0, azimuth_step_deg=30.0
+    )
     assert reach.zenith.shape == (7,) and reach.azimuth.shape == (12,)
     assert np.isclose(np.rad2deg(reach.zenith[-1]), problem.light_sphere.zenith_max_deg)
     assert reach.success.all() and reach.reachable_fraction == 1.0 and reach.unreachable == []
@@ -57,7 +58,9 @@ def test_unreachable_cells_are_reported(tmp_path: Path) -> None:
             "solver": {"ik_max_iter": 60},
         }
     )
-    reach = reachability_map(Setup.from_problem(problem), zenith_step_deg=30.0, azimuth_step_deg=60.0)
+    reach = reachability_map(
+        reacher_of(Setup.from_problem(problem)), zenith_step_deg=30.0, azimuth_step_deg=60.0
+    )
     assert 0.0 < reach.reachable_fraction < 1.0
     failed = ~reach.success
     assert np.isnan(reach.manipulability[failed]).all() and np.isnan(reach.theta[failed]).all()
@@ -75,7 +78,7 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
     setup = Setup.from_problem(problem)
     robot, env, sphere = setup.robot, setup.environment, setup.sphere
     assert env is not None
-    reach = reachability_map(setup, zenith_step_deg=6.0, azimuth_step_deg=30.0)
+    reach = reachability_map(reacher_of(setup), zenith_step_deg=6.0, azimuth_step_deg=30.0)
     assert reach.environment and reach.success.all()
     assert reach.taken.any() and reach.clear.any()
     assert 0.0 < reach.taken_fraction < 0.5 and reach.clear_fraction == 1.0 - reach.taken_fraction
@@ -91,9 +94,8 @@ def test_the_environment_takes_cells_away(tmp_path: Path) -> None:
         assert np.linalg.norm(light - target) <= max(reach.residual[i, j], POSE_TOL) + 1e-12
 
     free = problem_from_dict({**problem.to_dict(), "environment": {"enabled": False}}, source=problem.source)
-    without = reachability_map(
-        dataclasses.replace(setup, problem=free, environment=None), zenith_step_deg=6.0, azimuth_step_deg=30.0
-    )
+    bare = dataclasses.replace(setup, problem=free, environment=None)
+    without = reachability_map(reacher_of(bare), zenith_step_deg=6.0, azimuth_step_deg=30.0)
     assert not without.environment and not without.taken.any() and np.isnan(without.clearance).all()
     np.testing.assert_array_equal(without.success, reach.success)  # the IK part does not change
 
@@ -122,9 +124,9 @@ def test_no_blocked_cell_is_clear_from_a_clear_neighbours_posture() -> None:
     setup = Setup.from_problem(reduced_problem("rti_dome", camera_px=32))
     robot, env, sphere = setup.robot, setup.environment, setup.sphere
     assert env is not None
-    reach = reachability_map(setup, zenith_step_deg=6.0, azimuth_step_deg=20.0)
+    reach = reachability_map(reacher_of(setup), zenith_step_deg=6.0, azimuth_step_deg=20.0)
     assert reach.taken.any() and reach.clear_fraction > 0.5
-    reacher = Reacher(setup)
+    reacher = reacher_of(setup)
     n_z, n_a = reach.taken.shape
     for i, j in np.argwhere(~reach.clear):
         target = sphere.position(reach.zenith[i], reach.azimuth[j])

@@ -29,7 +29,7 @@ def setup(small_setup: Setup):
     postures = [generalized_ik(robot, sphere, path.positions[0]).theta]
     for k in path.landmark_knots[1:]:
         postures.append(generalized_ik(robot, sphere, path.positions[k], postures[-1], restarts=False).theta)
-    warm, failures = knot_ik(small_setup, path, np.array(postures))
+    warm, failures = knot_ik(small_setup.workcell, path, np.array(postures))
     assert not failures.any()
     return robot, sphere, path, warm
 
@@ -88,10 +88,8 @@ def transfer(setup, small_setup: Setup):
     """The path with its second segment a transfer (off the sphere), solved from the straight line."""
     robot, sphere, path, _ = setup
     leaving = path.with_transfers([False, True, False, False])
-    postures = np.array(
-        [generalized_ik(robot, sphere, path.positions[k]).theta for k in path.landmark_knots]
-    )
-    warm, _ = knot_ik(small_setup, leaving, postures)
+    postures = np.array([generalized_ik(robot, sphere, path.positions[k]).theta for k in path.landmark_knots])
+    warm, _ = knot_ik(small_setup.workcell, leaving, postures)
     segment = leaving.segments()[1]
     np.testing.assert_allclose(np.diff(warm[segment], 2, axis=0), 0.0, atol=1e-12)  # the joint-space line
     return leaving, TrajectoryOptimizer(robot, path_mode="free").solve(leaving, sphere, warm)
@@ -153,7 +151,7 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     thetas = warm[path.landmark_knots]
     seen, fallbacks = [], []
 
-    def on_the_sphere_fails(setup_, path_, warm_, fixed_start, *, fallback=False):
+    def on_the_sphere_fails(cell_, spec_, solver_, path_, warm_, fixed_start, *, fallback=False):
         seen.append(path_.transfers.copy())
         fallbacks.append(fallback)
         if not path_.transfers.any():
@@ -163,8 +161,24 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     monkeypatch.setattr(pipeline, "optimize_knots", on_the_sphere_fails)
     monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", path.n_knots)  # one window: the whole path
     with pytest.raises(SolverError):  # no knot the per-knot IK missed: nowhere to leave the sphere
-        pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), thetas)
-    left, left_warm, result = pipeline.optimize_path(small_setup, path, warm, np.array([0, 0, 3, 0]), thetas)
+        pipeline.optimize_path(
+            small_setup.workcell,
+            small_setup.trajectory_spec,
+            small_setup.solver,
+            path,
+            warm,
+            np.zeros(4, np.int64),
+            thetas,
+        )
+    left, left_warm, result = pipeline.optimize_path(
+        small_setup.workcell,
+        small_setup.trajectory_spec,
+        small_setup.solver,
+        path,
+        warm,
+        np.array([0, 0, 3, 0]),
+        thetas,
+    )
     assert result.status == "solved" and left.transfers.tolist() == [False, False, True, False]
     assert [t.tolist() for t in seen[1:]] == [[False] * 4, [False, False, True, False]]
     # the transfers can follow the solve on the sphere only where the IK missed a knot; not themselves
@@ -175,7 +189,15 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     # no knot missed, but a jump to another IK branch inside segment 0: that segment leaves the sphere
     jumped = warm.copy()
     jumped[path.segments()[0].start + 2] += 1.0
-    left, _, _ = pipeline.optimize_path(small_setup, path, jumped, np.zeros(4, np.int64), thetas)
+    left, _, _ = pipeline.optimize_path(
+        small_setup.workcell,
+        small_setup.trajectory_spec,
+        small_setup.solver,
+        path,
+        jumped,
+        np.zeros(4, np.int64),
+        thetas,
+    )
     assert left.transfers.tolist() == [True, False, False, False]
     # no knot missed, no jump, but the IK's knots collide on segment 3 (by the NLPs' sphere model)
     colliding_knot = warm[path.segments()[3].start + 1]
@@ -187,7 +209,15 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
             return np.array([-0.01 if np.array_equal(q, colliding_knot) else 0.1]), np.zeros(0)
 
     among_obstacles = replace(small_setup, environment=Colliding())
-    left, _, _ = pipeline.optimize_path(among_obstacles, path, warm, np.zeros(4, np.int64), thetas)
+    left, _, _ = pipeline.optimize_path(
+        among_obstacles.workcell,
+        among_obstacles.trajectory_spec,
+        among_obstacles.solver,
+        path,
+        warm,
+        np.zeros(4, np.int64),
+        thetas,
+    )
     assert left.transfers.tolist() == [False, False, False, True]
 
 
@@ -195,8 +225,8 @@ def test_the_numpy_cost_is_the_nlps(small_setup: Setup, setup) -> None:
     robot, sphere, path, warm = setup
     result = TrajectoryOptimizer(robot, joint_weights=1.0 / small_setup.limits.velocity**2).solve(path, sphere, warm)
     assert result.success
-    np.testing.assert_allclose(knot_cost(small_setup, result.theta), result.cost, rtol=1e-12)
-    assert knot_cost(small_setup, warm) > result.cost
+    np.testing.assert_allclose(knot_cost(small_setup.workcell, result.theta), result.cost, rtol=1e-12)
+    assert knot_cost(small_setup.workcell, warm) > result.cost
 
 
 def test_path_windows_cut_at_captures_and_cover_the_path(setup) -> None:
@@ -242,7 +272,7 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     _, _, path, warm = setup
     calls = []
 
-    def fails_from_a_fixed_start(setup_, path_, warm_, fixed_start, *, fallback=False):
+    def fails_from_a_fixed_start(cell_, spec_, solver_, path_, warm_, fixed_start, *, fallback=False):
         calls.append((path_.n_knots, fixed_start))
         if fixed_start:
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
@@ -254,7 +284,15 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     # the second window fails from the first's end, and is solved with the first (free start); the
     # third fails from the second's end, and with the second (fixed start at the first's end)
     with pytest.raises(SolverError, match=r"between captures 3 and 4 \(visiting order\): the trajectory NLP"):
-        pipeline.optimize_path(small_setup, path, warm, np.zeros(4, np.int64), warm[path.landmark_knots])
+        pipeline.optimize_path(
+            small_setup.workcell,
+            small_setup.trajectory_spec,
+            small_setup.solver,
+            path,
+            warm,
+            np.zeros(4, np.int64),
+            warm[path.landmark_knots],
+        )
     assert calls == [(21, False), (16, True), (36, False), (12, True), (27, True)]
 
 
@@ -274,7 +312,7 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails_from_the_default_barrier)
     free = replace(small_setup, environment=None)  # the fixture's path ignores the view: no environment
-    result = trajectory.optimize_knots(free, path, warm)
+    result = trajectory.optimize_knots(free.workcell, free.trajectory_spec, free.solver, path, warm)
     assert barriers == [None, trajectory.WARM_MU_INIT] and result.success
     assert expects == [None, "yes"]  # the retry, not the first try, expects an infeasible problem
     assert budgets == [trajectory.FIRST_TRY_ITER, free.solver.max_iter] and trajectory.FIRST_TRY_ITER < free.solver.max_iter
@@ -314,7 +352,7 @@ def test_no_small_barrier_retry_from_a_warm_start_off_the_sphere(small_setup: Se
     missed[3] += 0.05  # one knot: the light ~2 cm off the sphere
     assert not knots._warm_start_on_sphere(free, path, missed)
     with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
-        trajectory.optimize_knots(free, path, missed)
+        trajectory.optimize_knots(free.workcell, free.trajectory_spec, free.solver, path, missed)
     assert barriers == [None]
     assert budgets == [free.solver.max_iter]  # the only try: all of [solver] max_iter
 
@@ -336,7 +374,9 @@ def test_with_a_fallback_to_follow_the_first_try_has_its_budget_and_no_retry(
         barriers.clear()
         budgets.clear()
         with pytest.raises(SolverError, match="Infeasible_Problem_Detected"):
-            trajectory.optimize_knots(free, path, start, fallback=fallback)
+            trajectory.optimize_knots(
+                free.workcell, free.trajectory_spec, free.solver, path, start, fallback=fallback
+            )
         assert barriers == [None] and budgets == [budget]
 
 
@@ -357,7 +397,7 @@ def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Set
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", recorded)
     monkeypatch.setattr(knots, "FIRST_TRY_ITER", 3)
     free = replace(small_setup, environment=None)
-    result = trajectory.optimize_knots(free, path, warm)
+    result = trajectory.optimize_knots(free.workcell, free.trajectory_spec, free.solver, path, warm)
     assert [(t.status, t.iterations) for t in tries[:1]] == [("Maximum_Iterations_Exceeded", 3)]
     assert len(tries) == 2 and tries[1].success and result.success and tries[1].iterations > 3
 
@@ -399,9 +439,11 @@ def test_the_nlps_hessian_and_jacobian_are_casadis_own(monkeypatch) -> None:
     q = ca.MX.sym("q", robot.n)
     rows = ca.Function("rows", [q], [environment_rows(env, robot, q)])
     ends, initial = (robot.theta_ref, robot.theta_ref + 0.3), robot.theta_ref + np.zeros((4, 1))
-    transfer._transfer_nlp(setup, rows, *ends, initial)
-    transfer._transfer_nlp(setup, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5)
-    posture = ClearPosture(setup, env)
+    transfer._transfer_nlp(setup.workcell, setup.solver, rows, *ends, initial)
+    transfer._transfer_nlp(
+        setup.workcell, setup.solver, rows, *ends, initial, np.random.default_rng(5).random((4, rows.size1_out(0))) < 0.5
+    )
+    posture = ClearPosture(setup.workcell, env, setup.solver)
     monkeypatch.setattr(ca, "nlpsol", capture)
     posture._solver(np.random.default_rng(6).random((1, env.clearance_function(robot).size1_out(0))) < 0.2, False)
     assert len(captured) == 7

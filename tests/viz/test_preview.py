@@ -15,7 +15,7 @@ import pytest
 import trimesh
 import umsgpack
 import zmq
-from conftest import reduced_problem
+from conftest import reduced_problem, search_landmarks
 from scipy.spatial.transform import Rotation, Slerp
 
 from optlight.errors import OptlightError
@@ -472,10 +472,10 @@ def test_show_serves_until_enter_then_stops(preview, monkeypatch, capsys):
 
 
 def test_at_best_landmark_holds_the_light_there() -> None:
-    from optlight import Setup, find_landmarks
+    from optlight import Setup
 
     setup = Setup.from_problem(reduced_problem(camera_px=48, landmarks={"count": 4}))
-    landmarks = find_landmarks(setup)
+    landmarks = search_landmarks(setup)
     scene, robot = setup.scene, setup.robot
     preview = Preview.at_best_landmark(scene, robot, landmarks)
     best = min(landmarks.landmarks, key=lambda lm: lm.cost)

@@ -1,5 +1,6 @@
 """Finding the landmarks (docs/design.md §5): :func:`find_landmarks` runs the azimuth mode or the
-free mode over a built setup, and :func:`distinct_landmarks` drops landmarks closer than a tolerance.
+free mode over a work cell's allowed lights, and :func:`distinct_landmarks` drops landmarks closer
+than a tolerance.
 """
 
 from __future__ import annotations
@@ -25,19 +26,31 @@ from optlight.planning.landmarks.sweep import (
 )
 from optlight.planning.landmarks.types import Array, CostGrid, Landmark, LandmarkSet, Progress
 from optlight.planning.nlp import Solve
-from optlight.setup import Setup
+from optlight.spec import LandmarksSpec, SolverSpec
 from optlight.threads import in_background
+from optlight.workcell import ImageCosts, Workcell
 
 
 def find_landmarks(
-    setup: Setup, *, progress: Progress | None = None, found: Callable[[Landmark], None] | None = None
+    cell: Workcell,
+    costs: ImageCosts,
+    spec: LandmarksSpec,
+    solver: SolverSpec,
+    file: str = "<inline>",
+    *,
+    progress: Progress | None = None,
+    found: Callable[[Landmark], None] | None = None,
 ) -> LandmarkSet:
-    """The landmarks of a built problem (``[landmarks]``, ``[objective]``, ``[solver]``): see the
-    module docstring. ``progress(done, total)`` is called after each azimuth (azimuth mode) or each
-    sweep row and landmark (free mode); ``found(landmark)`` with each landmark as it is found, in
-    the order of the result (e.g. to place it meanwhile, :class:`~optlight.pipeline.PlacementAhead`)."""
+    """The landmarks on the lights ``cell``'s sphere allows, for the image objective ``costs``
+    (``[objective]``), searched as ``spec`` (``[landmarks]``) says with IPOPT's ``solver`` settings
+    (``[solver]``); ``file`` the problem file its errors name. See the module docstring; from a
+    built setup: ``find_landmarks(setup.workcell, setup.image_costs, setup.landmark_spec,
+    setup.solver, setup.file)``. ``progress(done, total)`` is called after each azimuth (azimuth
+    mode) or each sweep row and landmark (free mode); ``found(landmark)`` with each landmark as it is
+    found, in the order of the result (e.g. to place it meanwhile,
+    :class:`~optlight.pipeline.PlacementAhead`)."""
     t0 = time.perf_counter()
-    search = LandmarkSearch(setup)
+    search = LandmarkSearch(cell, costs, spec, solver, file)
     found = found or (lambda landmark: None)
     if search.spec.mode == "azimuth":
         landmarks, histograms, visibilities, grid = _azimuth_mode(search, progress, found)
@@ -52,7 +65,7 @@ def find_landmarks(
         sweep=grid,
         resolution=(search.search.camera.width, search.search.camera.height),
         time_s=time.perf_counter() - t0,
-        view_zenith=setup.view_zenith,
+        view_zenith=cell.view_zenith,
         notes=tuple(_view_notes(search, landmarks, grid)),
         shadows=np.packbits(np.array(visibilities, bool).reshape(len(landmarks), -1), axis=1),
     )

@@ -16,7 +16,8 @@ import numpy as np
 
 from optlight.planning.landmarks.types import Array, Landmark
 from optlight.planning.nlp import Solve
-from optlight.setup import Setup
+from optlight.spec import LandmarksSpec, SolverSpec
+from optlight.workcell import ImageCosts, Workcell
 
 #: Largest number of solves per seed: the first with the mask at the seed, then one more each time
 #: the mask at the solution differs from the one the solve used.
@@ -47,20 +48,24 @@ Scored = tuple[float, Array, Candidate]
 
 class LandmarkSearch:
     """What both modes share: the camera-resolution scene and objective (reported costs), the search
-    scene and objective (sweeps, NLPs, candidate scores), all from the built setup; the refinement of
-    one seed with the visibility mask recomputed between solves, and the final scoring."""
+    scene and objective (sweeps, NLPs, candidate scores) of ``costs``, the lights ``cell``'s sphere
+    allows, ``spec`` (``[landmarks]``), ``solver`` (``[solver]``) and the problem ``file`` its errors
+    name; the refinement of one seed with the visibility mask recomputed between solves, and the
+    final scoring."""
 
-    def __init__(self, setup: Setup) -> None:
-        self.spec = setup.landmark_spec
-        self.solver = setup.solver
-        self.file = setup.file
-        self.scene = setup.scene
-        self.objective = setup.objective
-        self.search = setup.search_scene
-        self.search_objective = setup.search_objective
+    def __init__(
+        self, cell: Workcell, costs: ImageCosts, spec: LandmarksSpec, solver: SolverSpec, file: str
+    ) -> None:
+        self.spec = spec
+        self.solver = solver
+        self.file = file
+        self.scene = costs.scene
+        self.objective = costs.objective
+        self.search = costs.search_scene
+        self.search_objective = costs.search_objective
         #: The lights the search may use (the view's lights taken away) and the cap as requested.
-        self.sphere = setup.sphere
-        self.requested = setup.scene.sphere
+        self.sphere = cell.sphere
+        self.requested = costs.scene.sphere
 
     def refine(
         self, seed: Candidate, solve: Callable[[float, float, Array], Solve], mask: Array | None = None

@@ -28,7 +28,8 @@ from optlight.planning.nlp import (
 )
 from optlight.planning.placement.light import CLEARANCE_TOL, SOLVERS_KEPT, Array
 from optlight.planning.trajectory import WARM_MU_INIT, solve_active_rows
-from optlight.setup import Setup
+from optlight.spec import SolverSpec
+from optlight.workcell import Workcell
 
 #: Largest |h|∞ (m) and light position error (m) of a posture found by :class:`ClearPosture`, at θ
 #: projected back into the limits: IPOPT relaxes them by ~1e-8 relative (``bound_relax_factor``),
@@ -55,8 +56,9 @@ class ClearPosture:
                               c(θ) ≥ s,  v(θ) ≥ s,  lower + m ≤ θ ≤ upper − m
 
     (the trajectory NLP's landmark pin; c, v the environment's clearance and view rows, v only when
-    its view cone is on; s = :data:`~optlight.environment.CAPTURE_SLACK`). The sphere is the
-    problem's; IPOPT's iteration limit and tolerance come from ``[solver]``. :meth:`solve` checks its
+    its view cone is on; s = :data:`~optlight.environment.CAPTURE_SLACK`). The robot and sphere are
+    the work cell's, ``environment`` its environment; IPOPT's iteration limit and tolerance come from
+    ``solver`` (``[solver]``). :meth:`solve` checks its
     answer with pinocchio.
 
     Clearance rows as the trajectory NLP takes them (:func:`~optlight.planning.trajectory.solve_active_rows`,
@@ -72,12 +74,12 @@ class ClearPosture:
     the one NLP has every row, expanded to SX as before.
     """
 
-    def __init__(self, setup: Setup, environment: Environment) -> None:
-        self.setup = setup
-        self.robot = robot = setup.robot
+    def __init__(self, cell: Workcell, environment: Environment, solver: SolverSpec) -> None:
+        self.cell = cell
+        self.robot = robot = cell.robot
         self._lower, self._upper = knot_bounds(robot)
         self.environment = environment
-        self.sphere = sphere = setup.sphere
+        self.sphere = sphere = cell.sphere
         theta = ca.SX.sym("theta", robot.n)
         target, t1, t2 = (ca.SX.sym(name, 3) for name in ("a_star", "t1", "t2"))
         a, rot = robot.symbolic_light_pose(theta)
@@ -90,7 +92,7 @@ class ClearPosture:
         # IPOPT told to expect that gives up about three times sooner, and the solves that succeed
         # succeed all the same.
         self._options = ipopt_options(
-            setup.solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
+            solver, ipopt__hessian_approximation="exact", ipopt__expect_infeasible_problem="yes"
         )
         #: (clearance row set or None, small barrier) -> (nlp, lbg, ubg)
         self._solvers: OrderedDict[tuple[tuple[int, ...] | None, bool], tuple[ca.Function, Array, Array]]
@@ -195,7 +197,7 @@ class ClearPosture:
             solved = run(nlp, {"x0": start[0], "p": parameters, **bounds})
             return solved, solved.x[None] if solved.success else None
 
-        solved = solve_active_rows(self.setup, warm[None], attempt, bound=CAPTURE_SLACK)
+        solved = solve_active_rows(self.cell, warm[None], attempt, bound=CAPTURE_SLACK)
         if not solved.success:
             return None
         theta = np.clip(solved.x, self._lower, self._upper)

@@ -31,7 +31,8 @@ from optlight.planning.nlp import (
 from optlight.planning.trajectory import solve_active_rows
 from optlight.robot import KinematicState, generalized_ik
 from optlight.scene import Scene
-from optlight.setup import Setup
+from optlight.spec import SolverSpec
+from optlight.workcell import ImageCosts, Workcell
 
 Array = NDArray[np.float64]
 
@@ -102,26 +103,27 @@ class PlacementResult:
 
 
 class LightPlacement:
-    """The joint-space placement NLP of a built setup (see the module docstring): its objective
-    built once, one ``nlpsol`` per set of clearance rows on first use (:data:`SOLVERS_KEPT` kept).
+    """The joint-space placement NLP of ``cell``'s robot on its sphere (see the module docstring):
+    its objective built once, one ``nlpsol`` per set of clearance rows on first use
+    (:data:`SOLVERS_KEPT` kept), with IPOPT's settings from ``solver``.
 
-    The NLP renders the setup's search scene with its search objective; reported costs use the
-    camera-resolution scene and objective. The setup's environment (None when ``[environment]`` is
-    not enabled) adds its clearance and view rows.
+    The NLP renders the search scene with its search objective (``costs``); reported costs use the
+    camera-resolution scene and objective. The cell's environment (None when it has none) adds its
+    clearance and view rows.
     """
 
-    def __init__(self, setup: Setup) -> None:
-        self.setup = setup
-        self.scene = setup.scene
-        self.robot = robot = setup.robot
+    def __init__(self, cell: Workcell, costs: ImageCosts, solver: SolverSpec) -> None:
+        self.cell = cell
+        self.scene = costs.scene
+        self.robot = robot = cell.robot
         self._lower, self._upper = knot_bounds(robot)
-        self.sphere = sphere = setup.sphere
-        self.objective = setup.objective
-        self.search = setup.search_scene
-        self.search_objective = setup.search_objective
+        self.sphere = sphere = cell.sphere
+        self.objective = costs.objective
+        self.search = costs.search_scene
+        self.search_objective = costs.search_objective
         #: The environment whose rows are constraints, or None.
-        self.environment = setup.environment
-        self._ik = dict(setup.ik)
+        self.environment = cell.environment
+        self._ik = dict(cell.ik)
 
         theta = ca.MX.sym("theta", robot.n)
         visibility = ca.MX.sym("v", self.search.gbuffer.size)
@@ -145,7 +147,7 @@ class LightPlacement:
         # scaling benchmark's 144 captures with 3 obstacles, half the iterations and a third of the
         # time, the same solves succeeding and the same plan)
         self._options = ipopt_options(
-            setup.solver,
+            solver,
             ipopt__obj_scaling_factor=self.objective_scale,
             ipopt__constr_viol_tol=CONSTRAINT_TOL,
             ipopt__acceptable_constr_viol_tol=CONSTRAINT_TOL,
@@ -237,7 +239,7 @@ class LightPlacement:
             solves.append(self._margined(nlp, start[0], p, full_lbg, full_ubg, relax))
             return solves[-1], solves[-1].x[None] if solves[-1].success else None
 
-        last = solve_active_rows(self.setup, theta0[None], attempt, bound=CAPTURE_SLACK)
+        last = solve_active_rows(self.cell, theta0[None], attempt, bound=CAPTURE_SLACK)
         return dataclasses.replace(last, iterations=sum(s.iterations for s in solves))
 
     def _margined(self, nlp: ca.Function, theta0: Array, p: Array, lbg: Array, ubg: Array, relax: bool) -> Solve:

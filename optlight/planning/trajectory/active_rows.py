@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.planning.trajectory.optimizer import Array
-from optlight.setup import Setup
+from optlight.workcell import Workcell
 
 #: What an NLP solve of :func:`solve_active_rows` returns.
 _Result = TypeVar("_Result")
@@ -27,7 +27,7 @@ ACTIVE_ROUNDS = 2
 
 
 def solve_active_rows(
-    setup: Setup,
+    cell: Workcell,
     warm: Array,
     solve: Callable[[NDArray[np.bool_] | None, Array], tuple[_Result, Array | None]],
     bound: float = 0.0,
@@ -45,7 +45,7 @@ def solve_active_rows(
     Knot by knot, not one row set for all knots: a row near at some knot is far at most others (on
     the collision problem's second window, 817 (knot, row) pairs instead of the 42 rows near
     somewhere at each of its 57 knots, 2,394), and IPOPT's linear algebra grows with the pairs."""
-    env, robot = setup.environment, setup.robot
+    env, robot = cell.environment, cell.robot
     if env is None or not env.collisions:
         return solve(None, warm)[0]
     active: NDArray[np.bool_] | None = near_rows(env.clearance_values(robot, warm), ACTIVE_DISTANCE)

@@ -10,8 +10,8 @@ from scipy.interpolate import CubicSpline
 
 from optlight.planning.timing import chord_path
 from optlight.planning.trajectory.optimizer import Array
-from optlight.robot.ik import generalized_ik, ik_settings
-from optlight.setup import Setup
+from optlight.robot.ik import generalized_ik
+from optlight.workcell import Workcell
 
 #: import the verifier).
 PATH_DEVIATION_M = 2.5e-3
@@ -21,7 +21,7 @@ DEVIATION_SAMPLES = 8
 MAX_PATH_REFINEMENTS = 6
 
 
-def follow_planned_path(setup: Setup, knots: Array) -> Array:
+def follow_planned_path(cell: Workcell, knots: Array) -> Array:
     """The knots (K, n) (rad) of one segment on the sphere, with knots added where the path the
     timing will follow strays from the planned one.
 
@@ -40,10 +40,10 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
     joint bounds. Halving an interval shrinks the spline's bulge about fourfold; at most
     :data:`MAX_PATH_REFINEMENTS` rounds. What cannot be put back is left as it is (the verification
     reports it)."""
-    planned = setup.robot.light_positions(knots)
+    planned = cell.robot.light_positions(knots)
     if len(planned) < 2:
         return knots
-    bounds = (setup.limits.lower, setup.limits.upper)
+    bounds = (cell.limits.lower, cell.limits.upper)
     w = knots
     for _ in range(MAX_PATH_REFINEMENTS):
         chord = chord_path(w, bounds)
@@ -51,8 +51,8 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
             return w
         w = chord[1].copy()
         changed = False
-        for i in np.flatnonzero(_polyline_distance(setup.robot.light_positions(w), planned) > PATH_DEVIATION_M):
-            on_path = _onto_path(setup, w[i], planned)
+        for i in np.flatnonzero(_polyline_distance(cell.robot.light_positions(w), planned) > PATH_DEVIATION_M):
+            on_path = _onto_path(cell, w[i], planned)
             if on_path is not None:
                 w[i], changed = on_path, True
         chord = chord_path(w)  # the parameter of the corrected waypoints
@@ -62,10 +62,10 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
         spline = CubicSpline(s, w, bc_type="not-a-knot")
         tau = (np.arange(DEVIATION_SAMPLES) + 0.5) / DEVIATION_SAMPLES
         between = s[:-1, None] + tau[None, :] * np.diff(s)[:, None]
-        lights = setup.robot.light_positions(spline(between.ravel()))
+        lights = cell.robot.light_positions(spline(between.ravel()))
         stray = _polyline_distance(lights, planned).reshape(between.shape).max(axis=1) > PATH_DEVIATION_M
         for i in np.flatnonzero(stray)[::-1]:  # from the end: the indices before stay valid
-            middle = _onto_path(setup, spline(0.5 * (s[i] + s[i + 1])), planned)
+            middle = _onto_path(cell, spline(0.5 * (s[i] + s[i + 1])), planned)
             if middle is not None:
                 w, changed = np.insert(w, i + 1, middle, axis=0), True
         if not changed:
@@ -73,22 +73,22 @@ def follow_planned_path(setup: Setup, knots: Array) -> Array:
     return w
 
 
-def _onto_path(setup: Setup, theta: Array, planned: Array) -> Array | None:
+def _onto_path(cell: Workcell, theta: Array, planned: Array) -> Array | None:
     """Joint angles near ``theta`` (rad) whose light is on the planned path (the polyline through
     ``planned`` (K, 3), m, carried onto the sphere), aimed at O, within the joint bounds
     (:func:`follow_planned_path`); None when the IK does not converge there."""
-    sphere = setup.sphere
-    target = _nearest_on_polyline(setup.robot.light_positions(theta)[0], planned)
-    return _light_at(setup, sphere.center + sphere.radius * _unit(target - sphere.center), theta)
+    sphere = cell.sphere
+    target = _nearest_on_polyline(cell.robot.light_positions(theta)[0], planned)
+    return _light_at(cell, sphere.center + sphere.radius * _unit(target - sphere.center), theta)
 
 
-def _light_at(setup: Setup, target: Array, theta: Array) -> Array | None:
+def _light_at(cell: Workcell, target: Array, theta: Array) -> Array | None:
     """The generalized IK (no restarts, the joint-limit task) from ``theta`` (rad) to the light at
     ``target`` (m, on the sphere) aimed at O: its joint angles when it converges within the joint
     bounds, else None."""
-    settings = {**ik_settings(setup.solver), "secondary": ("joint_limits",)}
-    ik = generalized_ik(setup.robot, setup.sphere, target, theta, restarts=False, **settings)
-    inside = np.all((ik.theta >= setup.limits.lower) & (ik.theta <= setup.limits.upper))
+    settings = {**cell.ik, "secondary": ("joint_limits",)}
+    ik = generalized_ik(cell.robot, cell.sphere, target, theta, restarts=False, **settings)
+    inside = np.all((ik.theta >= cell.limits.lower) & (ik.theta <= cell.limits.upper))
     return ik.theta if ik.success and inside else None
 
 
@@ -103,7 +103,7 @@ def _unit(v: Array) -> Array:
 ARC_SAG_M = 0.5 * PATH_DEVIATION_M
 
 
-def knots_on_arcs(setup: Setup, knots: Array) -> Array:
+def knots_on_arcs(cell: Workcell, knots: Array) -> Array:
     """The knots (K, n) (rad) of one segment on the sphere, with knots added on the great-circle
     arc between two consecutive knots whose lights are so far apart that the chord between them
     sags more than :data:`ARC_SAG_M` below the arc (the free path's NLP bounds the joints' steps,
@@ -113,22 +113,22 @@ def knots_on_arcs(setup: Setup, knots: Array) -> Array:
     :data:`MAX_PATH_REFINEMENTS` deep; where the IK fails, the interval is left as it is."""
     out = [knots[0]]
     for q0, q1 in zip(knots[:-1], knots[1:], strict=True):
-        out += _arc_knots(setup, q0, q1, MAX_PATH_REFINEMENTS)
+        out += _arc_knots(cell, q0, q1, MAX_PATH_REFINEMENTS)
         out.append(q1)
     return np.array(out)
 
 
-def _arc_knots(setup: Setup, q0: Array, q1: Array, depth: int) -> list[Array]:
+def _arc_knots(cell: Workcell, q0: Array, q1: Array, depth: int) -> list[Array]:
     """Knots strictly between ``q0`` and ``q1`` on their lights' arc (:func:`knots_on_arcs`)."""
-    sphere = setup.sphere
-    u0, u1 = (_unit(a - sphere.center) for a in setup.robot.light_positions(np.array([q0, q1])))
+    sphere = cell.sphere
+    u0, u1 = (_unit(a - sphere.center) for a in cell.robot.light_positions(np.array([q0, q1])))
     half = 0.5 * float(np.arctan2(np.linalg.norm(np.cross(u0, u1)), u0 @ u1))
     if depth == 0 or sphere.radius * (1.0 - np.cos(half)) <= ARC_SAG_M or np.linalg.norm(u0 + u1) < 1e-9:
         return []
-    middle = _light_at(setup, sphere.center + sphere.radius * _unit(u0 + u1), 0.5 * (q0 + q1))
+    middle = _light_at(cell, sphere.center + sphere.radius * _unit(u0 + u1), 0.5 * (q0 + q1))
     if middle is None:
         return []
-    return [*_arc_knots(setup, q0, middle, depth - 1), middle, *_arc_knots(setup, middle, q1, depth - 1)]
+    return [*_arc_knots(cell, q0, middle, depth - 1), middle, *_arc_knots(cell, middle, q1, depth - 1)]
 
 
 def _polyline_distance(points: Array, polyline: Array) -> Array:

@@ -15,7 +15,8 @@ from optlight.planning.path import LightPath
 from optlight.planning.trajectory.active_rows import rows_of, solve_active_rows
 from optlight.planning.trajectory.optimizer import Array, TrajectoryNLPResult, TrajectoryOptimizer
 from optlight.robot import light_residual
-from optlight.setup import Setup
+from optlight.spec import SolverSpec, TrajectorySpec
+from optlight.workcell import Workcell
 
 #: Most IPOPT iterations of the trajectory NLP's first try when a second try or the caller's fallback
 #: can follow it (:func:`optimize_knots`; fewer when ``[solver] max_iter`` is smaller).
@@ -23,9 +24,17 @@ FIRST_TRY_ITER = 120
 
 
 def optimize_knots(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False, *, fallback: bool = False
+    cell: Workcell,
+    spec: TrajectorySpec,
+    solver: SolverSpec,
+    path: LightPath,
+    warm: Array,
+    fixed_start: bool = False,
+    *,
+    fallback: bool = False,
 ) -> TrajectoryNLPResult:
-    """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
+    """The trajectory NLP (``spec``: ``[trajectory]``'s path mode and step; ``solver``: IPOPT's
+    settings) of ``cell``'s robot over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
     the first knot kept at its ``warm`` angles with ``fixed_start``; ``fallback``: the caller has
     another way to go when this one fails (:func:`~optlight.pipeline.optimize_window`'s transfers,
     for a warm start with segments the per-knot IK did not follow).
@@ -80,16 +89,16 @@ def optimize_knots(
     iterations: it is the last.
     Raises :class:`SolverError` when the solves fail.
     """
-    can_retry = not fallback and _warm_start_on_sphere(setup, path, warm)
+    can_retry = not fallback and _warm_start_on_sphere(cell, path, warm)
     first_budget = FIRST_TRY_ITER if can_retry or fallback else None
-    first = _active_rounds(setup, path, warm, fixed_start, retry=False, max_iter=first_budget)
+    first = _active_rounds(cell, spec, solver, path, warm, fixed_start, retry=False, max_iter=first_budget)
     retry = not first.success and can_retry
-    nlp = _active_rounds(setup, path, warm, fixed_start, retry=True) if retry else first
+    nlp = _active_rounds(cell, spec, solver, path, warm, fixed_start, retry=True) if retry else first
     iterations = first.iterations + (0 if nlp is first else nlp.iterations)
     time_s = first.time_s + (0.0 if nlp is first else nlp.time_s)
     nlp = dataclasses.replace(nlp, iterations=iterations, time_s=time_s)
     if not nlp.success and nlp.status == IPOPT_ITERATION_LIMIT:
-        raise iteration_limit_error("the trajectory NLP", setup.solver.max_iter)
+        raise iteration_limit_error("the trajectory NLP", solver.max_iter)
     if not nlp.success:
         raise SolverError(
             f"the trajectory NLP failed ({nlp.status} after {nlp.iterations} iterations, "
@@ -104,44 +113,51 @@ def optimize_knots(
 WARM_H_TOL = 1e-4
 
 
-def _warm_start_on_sphere(setup: Setup, path: LightPath, warm: Array) -> bool:
+def _warm_start_on_sphere(cell: Workcell, path: LightPath, warm: Array) -> bool:
     """Whether ``warm`` (K, n) holds the light on the sphere, pointing at O, to :data:`WARM_H_TOL`
     at every knot of ``path`` that the NLP keeps there (:meth:`LightPath.on_sphere`)."""
     return all(
-        np.abs(light_residual(setup.robot, setup.sphere, theta)).max() <= WARM_H_TOL
+        np.abs(light_residual(cell.robot, cell.sphere, theta)).max() <= WARM_H_TOL
         for theta in warm[path.on_sphere()]
     )
 
 
 def _active_rounds(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool, retry: bool, max_iter: int | None = None
+    cell: Workcell,
+    spec: TrajectorySpec,
+    solver: SolverSpec,
+    path: LightPath,
+    warm: Array,
+    fixed_start: bool,
+    retry: bool,
+    max_iter: int | None = None,
 ) -> TrajectoryNLPResult:
     """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
     from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not and at most
     ``max_iter`` iterations each (None: ``[solver] max_iter``); the last solve, with the iterations
     and time of all."""
-    env = setup.environment
+    env = cell.environment
     solves: list[TrajectoryNLPResult] = []
 
     def solve(active: NDArray[np.bool_] | None, start: Array) -> tuple[TrajectoryNLPResult, Array | None]:
         rows = None if active is None else rows_of(active)
         optimizer = TrajectoryOptimizer(
-            setup.robot,
-            path_mode=setup.trajectory_spec.path,
-            max_step=setup.trajectory_spec.max_step_rad,
-            joint_weights=1.0 / setup.limits.velocity**2,
-            clearance=env.clearance_function(setup.robot, rows) if env and env.collisions else None,
+            cell.robot,
+            path_mode=spec.path,
+            max_step=spec.max_step_rad,
+            joint_weights=1.0 / cell.limits.velocity**2,
+            clearance=env.clearance_function(cell.robot, rows) if env and env.collisions else None,
             active=None if active is None else active[:, rows],
-            view=env.view_cone_function(setup.robot) if env and env.view_cone else None,
+            view=env.view_cone_function(cell.robot) if env and env.view_cone else None,
             view_mode=env.view_mode if env else "capture",
-            solver=setup.solver,
+            solver=solver,
             retry=retry,
             max_iter=max_iter,
         )
-        solves.append(optimizer.solve(path, setup.sphere, start, fixed_start))
+        solves.append(optimizer.solve(path, cell.sphere, start, fixed_start))
         return solves[-1], solves[-1].theta if solves[-1].success else None
 
-    nlp = solve_active_rows(setup, warm, solve)
+    nlp = solve_active_rows(cell, warm, solve)
     return dataclasses.replace(
         nlp, iterations=sum(s.iterations for s in solves), time_s=sum(s.time_s for s in solves)
     )

@@ -30,8 +30,8 @@ from optlight.planning.nlp import (
     tangent_basis,
 )
 from optlight.planning.path import LightPath
-from optlight.setup import Setup
 from optlight.spec import SolverSpec
+from optlight.workcell import Workcell
 
 Array = NDArray[np.float64]
 
@@ -311,8 +311,9 @@ class TrajectoryOptimizer:
         )
 
 
-def knot_cost(setup: Setup, theta: Array) -> float:
-    """The cost :func:`optimize_knots` minimises, at the knots ``theta`` (K, n) (rad), in NumPy:
+def knot_cost(cell: Workcell, theta: Array) -> float:
+    """The cost :func:`optimize_knots` minimises for ``cell``'s robot and limits, at the knots
+    ``theta`` (K, n) (rad), in NumPy:
     Σ_k Σ_j (θ_{k+1,j} − θ_{k,j})² / v_max,j² + :data:`POSTURE_WEIGHT` Σ_k |θ_k − θ_ref|² (s²)."""
-    steps = np.diff(theta, axis=0) / setup.limits.velocity
-    return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - setup.robot.theta_ref) ** 2))
+    steps = np.diff(theta, axis=0) / cell.limits.velocity
+    return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - cell.robot.theta_ref) ** 2))

@@ -18,7 +18,8 @@ from optlight.planning.nlp import (
 )
 from optlight.planning.trajectory.active_rows import rows_of, solve_active_rows
 from optlight.planning.trajectory.optimizer import Array
-from optlight.setup import Setup
+from optlight.spec import SolverSpec
+from optlight.workcell import Workcell
 
 #: Knots of a transfer (start → first landmark, last landmark → start) at most this far apart (rad).
 TRANSFER_STEP = 0.1
@@ -28,9 +29,11 @@ TRANSFER_STEP = 0.1
 TRANSFER_PADDING = 0.002
 
 
-def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | None = None) -> Array:
-    """Joint angles (K, n) from ``start`` to ``goal`` (rad), both included: the light is off the
-    sphere here, moving to or from the captures.
+def plan_transfer(
+    cell: Workcell, solver: SolverSpec, start: Array, goal: Array, *, detour: Array | None = None
+) -> Array:
+    """Joint angles (K, n) of ``cell``'s robot from ``start`` to ``goal`` (rad), both included: the
+    light is off the sphere here, moving to or from the captures (IPOPT's settings from ``solver``).
 
     The straight line in joint space, knots at most :data:`TRANSFER_STEP` apart per joint, when it
     keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``, not the beam:
@@ -45,11 +48,11 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     count = max(2, int(np.ceil(np.max(np.abs(goal - start)) / TRANSFER_STEP)) + 1)
     line = start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)
-    environment = setup.environment
+    environment = cell.environment
     view = environment is not None and environment.view_mode == "path"
     if environment is None or not (environment.collisions or view):
         return line
-    robot = setup.robot
+    robot = cell.robot
 
     def rows(theta: Array) -> Array:
         clearance, view_rows = environment.sphere_clearance(robot, theta, beam=False)
@@ -64,19 +67,21 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
         rows = None if active is None else rows_of(active)
         q = ca.MX.sym("q", robot.n)
         row_function = ca.Function(
-            "transfer_rows", [q], [environment_rows(environment, robot, q, view=view, beam=False, clearance_rows=rows)]
+            "transfer_rows",
+            [q],
+            [environment_rows(environment, robot, q, view=view, beam=False, clearance_rows=rows)],
         )
         if active is not None and rows is not None:  # the view rows, after the clearance rows, at every knot
             views = row_function.size1_out(0) - len(rows)
             active = np.hstack([active[:, rows], np.ones((len(initial), views), bool)])
-        knots, status = _transfer_nlp(setup, row_function, start, goal, initial, active)
+        knots, status = _transfer_nlp(cell, solver, row_function, start, goal, initial, active)
         return (knots, status), knots
 
     status = ""
     for initial in (line, None if detour is None else _thinned(np.asarray(detour, float), TRANSFER_STEP)):
         if initial is None or len(initial) < 3:
             continue
-        knots, status = solve_active_rows(setup, initial[1:-1], solve, bound=TRANSFER_PADDING - 1e-8)
+        knots, status = solve_active_rows(cell, initial[1:-1], solve, bound=TRANSFER_PADDING - 1e-8)
         if knots is not None and all(rows(t).min(initial=np.inf) >= TRANSFER_PADDING - 1e-8 for t in knots):
             return np.vstack([start, knots, goal])
     raise SolverError(
@@ -86,7 +91,8 @@ def plan_transfer(setup: Setup, start: Array, goal: Array, *, detour: Array | No
 
 
 def _transfer_nlp(
-    setup: Setup,
+    cell: Workcell,
+    solver_spec: SolverSpec,
     row_function: ca.Function,
     start: Array,
     goal: Array,
@@ -96,18 +102,18 @@ def _transfer_nlp(
     """The transfer NLP of :func:`plan_transfer` over ``len(initial)`` interior knots from ``initial``
     (rad), the rows of ``row_function`` at every interior knot, or where ``active`` (len(initial), m)
     is True: the interior knots (None when IPOPT fails) and IPOPT's status."""
-    n, inner = setup.robot.n, len(initial)
+    n, inner = cell.robot.n, len(initial)
     x = ca.MX.sym("theta", n, inner)
     ends = ca.MX.sym("ends", n, 2)
     knots = ca.horzcat(ends[:, 0], x, ends[:, 1])
     steps = knots[:, 1:] - knots[:, :-1]
-    weights = ca.DM(1.0 / setup.limits.velocity)
+    weights = ca.DM(1.0 / cell.limits.velocity)
     g, rows = selected_rows(row_function, x, range(inner), 0, active)
     cost = ca.sumsqr(ca.repmat(weights, 1, inner + 1) * steps)
-    options = knot_nlp_options(setup.solver)
+    options = knot_nlp_options(solver_spec)
     options.update(knot_derivatives(x, ca.vec(ends), cost, g, [rows]))
     solver = ca.nlpsol("transfer", "ipopt", {"x": ca.vec(x), "p": ca.vec(ends), "f": cost, "g": g}, options)
-    lower, upper = (np.tile(bound, inner) for bound in knot_bounds(setup.robot))
+    lower, upper = (np.tile(bound, inner) for bound in knot_bounds(cell.robot))
     x0 = np.clip(initial.ravel(), lower, upper)  # knot by knot, as ca.vec(x) stacks them
     out = solver(
         x0=x0, p=np.c_[start, goal].T.ravel(), lbx=lower, ubx=upper, lbg=TRANSFER_PADDING, ubg=np.inf
