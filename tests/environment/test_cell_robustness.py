@@ -135,9 +135,10 @@ def test_pairs_that_never_come_close_have_no_sphere_rows(name: str) -> None:
 
 @pytest.mark.slow
 def test_ur5_cap_is_clear_where_coal_says_so(tmp_path) -> None:
-    """A UR5 cell (random cell 19: a mesh, an RTI set, a table, a wall and the camera's stand) whose every reached light the
-    spheres of the housing and the first wrist link took away: its reachability map now has clear
-    lights, and coal finds the map's postures there clear of everything and out of the view."""
+    """A UR5 cell (random cell 19: a mesh, an RTI set, a table, a wall and the camera's stand) whose
+    every reached light the spheres of the housing and the first wrist link took away: its
+    reachability map now has clear lights, and coal finds the map's postures there clear of
+    everything and out of the view."""
     from optlight.planning.policy import Reacher
     from optlight.planning.reach import reachability_map
 
