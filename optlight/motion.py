@@ -160,6 +160,22 @@ class _Scaled:
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class Exposure:
+    """The camera's exposure and the blur a capture tolerates: ``seconds`` T, the largest angle
+    ``blur_rad`` (rad) the light may turn about the object's centre during T and the largest distance
+    ``blur_m`` (m) it may travel."""
+
+    seconds: float
+    blur_rad: float
+    blur_m: float
+
+    def __post_init__(self) -> None:
+        if not all(np.isfinite(x) and x > 0 for x in (self.seconds, self.blur_rad, self.blur_m)):
+            raise ValueError(f"exposure and blur tolerances must be finite and positive, got {self}")
+
+
+
 class Trajectory:
     """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark.
 
@@ -206,6 +222,27 @@ class Trajectory:
     def capture_times(self) -> Array:
         """(M,) exposure times (s): the middle of each landmark's dwell."""
         return self.landmark_intervals.mean(axis=1)
+
+    def trigger_times(self, settle_s: float) -> Array:
+        """(M,) camera triggers (s): ``settle_s`` into each dwell, or the instant of a dwell of zero
+        length (a flying capture: the light passes the landmark then). ValueError when ``settle_s`` is
+        negative or not shorter than a dwell that has a length."""
+        lengths = self.landmark_intervals[:, 1] - self.landmark_intervals[:, 0]
+        stops = lengths > 0
+        if not (settle_s >= 0 and np.all(settle_s < lengths[stops])):
+            raise ValueError(
+                f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell "
+                f"({lengths[stops].min(initial=np.inf):.6g} s)"
+            )
+        return self.landmark_intervals[:, 0] + np.where(stops, settle_s, 0.0)
+
+    def exposure_windows(self, settle_s: float, exposure_s: float) -> Array:
+        """(M, 2) start and end (s) of each capture's exposure of ``exposure_s``: from the trigger on
+        after a stop (:meth:`trigger_times`), centred on the trigger on the fly, within [0, duration]."""
+        triggers = self.trigger_times(settle_s)
+        flying = self.landmark_intervals[:, 1] == self.landmark_intervals[:, 0]
+        start = triggers - np.where(flying, 0.5 * exposure_s, 0.0)
+        return np.clip(np.column_stack([start, start + exposure_s]), 0.0, self.duration)
 
     @property
     def boundaries(self) -> Array:

@@ -49,7 +49,7 @@ from optlight.planning.waypoints import Waypoints
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.stages import OptimizedPath
-from optlight.verify import VerificationReport
+from optlight.verify import VerificationReport, capture_exposures
 from optlight.viz.drawing import FigureJob
 from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
@@ -398,6 +398,9 @@ def save_results(
                 light_positions=np.array([lm.position for lm in visited]),
                 light_angles_deg=np.rad2deg([(lm.zenith, lm.azimuth) for lm in visited]).reshape(-1, 2),
                 joint_names=robot.joint_names,
+                exposures=capture_exposures(
+                    trajectory, traj_spec.settle_s, traj_spec.exposure_s, robot.light_pose, setup.sphere.center
+                ),
             )
         ]
 

@@ -169,9 +169,19 @@ def path_bounds(
 class JerkLimitedMotion:
     """One segment: the path q(s) (cubic spline, s ∈ [0, L]) and ruckig's profile s(t), evaluated
     vectorised from the profile's seven phases (duration t_k, jerk j_k, and s, ṡ, s̈ at each phase start):
-    on phase k, with τ the time since its start, s = p_k + v_k τ + a_k τ²/2 + j_k τ³/6."""
+    on phase k, with τ the time since its start, s = p_k + v_k τ + a_k τ²/2 + j_k τ³/6.
 
-    def __init__(self, path: CubicSpline, bounds: tuple[float, float, float], index: int) -> None:
+    The profile starts and ends with s̈ = 0 and path speeds ṡ = ``speeds`` (0 ≤ each ≤ V; rest to rest
+    by default), never moving backwards (ṡ ≥ 0; ruckig fails when the distance is too short to change
+    from one speed to the other without reversing)."""
+
+    def __init__(
+        self,
+        path: CubicSpline,
+        bounds: tuple[float, float, float],
+        index: int,
+        speeds: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
         self.path = path
         self.length = float(path.x[-1])
         self.bounds = bounds
@@ -179,13 +189,18 @@ class JerkLimitedMotion:
         v, a, j = bounds
         otg = ruckig.Ruckig(1)
         inp = ruckig.InputParameter(1)
-        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
-        inp.target_position, inp.target_velocity, inp.target_acceleration = [self.length], [0.0], [0.0]
+        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [speeds[0]], [0.0]
+        inp.target_position, inp.target_velocity, inp.target_acceleration = [self.length], [speeds[1]], [0.0]
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
+        if any(speeds):
+            inp.min_velocity = [0.0]
         reference = ruckig.Trajectory(1)
         result = otg.calculate(inp, reference)
         if result not in (ruckig.Result.Working, ruckig.Result.Finished):
-            raise SolverError(f"segment {index}: ruckig returned {result} for bounds V={v}, A={a}, J={j}")
+            raise SolverError(
+                f"segment {index}: ruckig returned {result} for bounds V={v}, A={a}, J={j}, "
+                f"path speeds {speeds[0]:.6g} → {speeds[1]:.6g}"
+            )
         self.reference: ruckig.Trajectory | None = reference  # ruckig's own, which the tests compare
         profile = reference.profiles[0][0]
         if profile.brake.duration > 0 or profile.accel.duration > 0:

@@ -1,0 +1,209 @@
+"""Flying captures (docs/design.md §6): the path through all the landmarks timed as one motion that
+never stops at a capture, passing each landmark slowly enough that the light's motion during the
+camera's exposure stays within the blur tolerances.
+
+**Path.** One not-a-knot cubic spline q(s) through the knots of every segment over the cumulative
+chord parameter s (rad), the landmarks among its knots (each segment's waypoints first merged and
+kept within the joint bounds by :func:`~optlight.planning.chord.chord_path`, the whole spline then
+kept within them the same way). Unlike the stop mode's spline per segment, it is C² through the
+landmarks: q′ and q″ have no corner there, so the robot can pass a landmark at a non-zero speed with
+continuous q̇ and q̈.
+
+**Speed at a capture.** With p(q) the light's position and O the object's centre, the light moves at
+v = |p′(s)| ṡ (m/s) and turns about O at ω = |(I − d dᵀ) p′(s)| ṡ / |p − O| (rad/s),
+d = (p − O)/|p − O|; p′ = dp/ds by a central difference of the forward kinematics. During an exposure
+of T s the light moves about v T and turns about ω T, so the path speed at landmark k is capped at
+
+    c_k = :data:`SPEED_MARGIN` · min(blur_rad / (T |ω′|), blur_m / (T |p′|)),
+
+ω′ = ω/ṡ; the margin covers the speed and direction changing within the exposure (ṡ changes by at
+most J T²/8 around a landmark, where s̈ = 0). The first and the last capture are taken at rest (the
+approach ends and the retreat starts there).
+
+**Timing.** Segment i (landmark i to i+1) is the spline's restriction to [s_i, s_{i+1}], timed by the
+jerk-limited profile of :mod:`optlight.planning.jerk`: bounds (V_i, A_i, J_i) from the segment's
+derivative maxima (so every joint keeps its limits wherever ṡ ≤ V_i), and ruckig's time-optimal
+profile from (ṡ, s̈) = (c_i, 0) to (c_{i+1}, 0), c_k also at most the V of both segments around it.
+At a landmark both profiles have ṡ = c_k and s̈ = 0, so q̇ = q′ṡ and q̈ = q″ṡ² + q′s̈ are continuous.
+Where ruckig finds no profile without reversing (a short segment between speeds too different), both
+of its end speeds are halved and the path timed again. The bounds are chosen for the rest-to-rest
+duration (:func:`~optlight.planning.jerk.path_bounds`): sound, not the fastest profile with these end
+speeds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.interpolate import CubicSpline
+
+from optlight.errors import SolverError
+from optlight.motion import Exposure, Trajectory, assemble_trajectory, positive_limits
+from optlight.planning.chord import MAX_BULGE_REFINEMENTS, as_bounds, chord_path, spline_position_range
+from optlight.planning.jerk import JerkLimitedMotion, derivative_maxima, path_bounds
+from optlight.spec.trajectory import TrajectorySpec
+
+__all__ = ["SPEED_MARGIN", "capture_speed_caps", "exposure_of", "flying_timing"]
+
+Array = NDArray[np.float64]
+LightPositions = Callable[[Array], Array]
+
+#: Fraction of the blur-limited path speed planned at a capture (module docstring).
+SPEED_MARGIN = 0.9
+#: Largest number of times the end speeds of a segment are halved when ruckig finds no profile.
+MAX_SPEED_HALVINGS = 30
+#: Step (rad of chord parameter) of the central difference of the light's position along the path.
+FK_STEP = 1e-6
+
+
+def exposure_of(spec: TrajectorySpec) -> Exposure:
+    """The exposure and blur tolerances of a problem's ``[trajectory]`` (in s, rad and m)."""
+    return Exposure(spec.exposure_s, np.deg2rad(spec.blur_deg), spec.blur_mm * 1e-3)
+
+
+def capture_path(
+    segments: Sequence[Array], position_bounds: tuple[Array, Array] | None
+) -> tuple[CubicSpline, NDArray[np.intp]] | None:
+    """The spline q(s) through every segment's knots (module docstring) and the knot index of each of
+    the M landmarks; None when all the landmarks coincide."""
+    knots: list[Array] = [segments[0][:1]]
+    landmark = [0]
+    for w in segments:
+        chord = chord_path(w, position_bounds)
+        if chord is not None:
+            knots.append(chord[1][1:])
+        landmark.append(landmark[-1] + (0 if chord is None else len(chord[1]) - 1))
+    w_all = np.vstack(knots)
+    if len(w_all) < 2:
+        return None
+    index = np.asarray(landmark, np.intp)
+    lower, upper = position_bounds if position_bounds is not None else (-np.inf, np.inf)
+    for _ in range(MAX_BULGE_REFINEMENTS if position_bounds is not None else 0):
+        low, high = spline_position_range(_chord(w_all), w_all)
+        outside = np.flatnonzero(((low < lower) | (high > upper)).any(axis=1))
+        if outside.size == 0:
+            break
+        w_all = np.insert(w_all, outside + 1, 0.5 * (w_all[outside] + w_all[outside + 1]), axis=0)
+        index = index + np.searchsorted(outside, index, side="left")
+    return CubicSpline(_chord(w_all), w_all, bc_type="not-a-knot"), index
+
+
+def _chord(w: Array) -> Array:
+    """Cumulative chord parameter (K,) of waypoints (K, n)."""
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+
+
+def _restriction(path: CubicSpline, a: int, b: int) -> CubicSpline:
+    """The spline on knots a … b, its parameter shifted to start at 0."""
+    return CubicSpline.construct_fast(path.c[:, a:b].copy(), path.x[a : b + 1] - path.x[a])
+
+
+def capture_speed_caps(
+    path: CubicSpline, s: Array, light_positions: LightPositions, center: ArrayLike, exposure: Exposure
+) -> Array:
+    """Largest path speeds ṡ (rad/s) at the path parameters ``s`` (P,) that keep the blur of an
+    exposure within its tolerances, :data:`SPEED_MARGIN` included (module docstring)."""
+    s = np.asarray(s, float)
+    if s.size == 0:
+        return np.zeros(0)
+    lo, hi = float(path.x[0]), float(path.x[-1])
+    ahead, behind = np.minimum(s + FK_STEP, hi), np.maximum(s - FK_STEP, lo)
+    p_plus, p_minus, p = (light_positions(path(x)) for x in (ahead, behind, s))
+    dp = (p_plus - p_minus) / (ahead - behind)[:, None]  # dp/ds (m/rad)
+    r = p - np.asarray(center, float)
+    dist = np.linalg.norm(r, axis=1)
+    d = r / dist[:, None]
+    turn = np.linalg.norm(dp - d * np.sum(dp * d, axis=1, keepdims=True), axis=1) / dist  # dω/dṡ
+    move = np.linalg.norm(dp, axis=1)
+    with np.errstate(divide="ignore"):
+        cap = np.minimum(exposure.blur_rad / (exposure.seconds * turn), exposure.blur_m / (exposure.seconds * move))
+    return SPEED_MARGIN * cap
+
+
+def flying_timing(
+    segments: Sequence[ArrayLike],
+    velocity_limit: ArrayLike,
+    acceleration_limit: ArrayLike,
+    jerk_limit: ArrayLike,
+    *,
+    light_positions: LightPositions,
+    center: ArrayLike,
+    exposure: Exposure,
+    joint_names: Sequence[str] | None = None,
+    approach: ArrayLike | None = None,
+    retreat: ArrayLike | None = None,
+    position_bounds: tuple[ArrayLike, ArrayLike] | None = None,
+) -> Trajectory:
+    """Time the path through the landmarks without stopping at them (module docstring): rest at the
+    first and the last landmark only, each other landmark passed at most at its blur-limited speed,
+    |q̇_j| ≤ velocity_limit_j, |q̈_j| ≤ acceleration_limit_j, |q⃛_j| ≤ jerk_limit_j everywhere.
+    Every landmark's dwell has zero length: the trajectory's capture time is when the light is there.
+
+    Args:
+        segments, approach, retreat, position_bounds, joint_names: as for
+            :func:`optlight.planning.jerk.jerk_limited_timing` (the approach and the retreat are
+            timed rest to rest, as there).
+        light_positions: joint angles (P, n) (rad) -> the light's positions (P, 3) (m, world).
+        center: the object's centre O (3,) (m, world), which the blur angle is measured about.
+        exposure: the exposure time and the blur tolerances.
+
+    Raises ValueError for bad inputs and :class:`SolverError` when ruckig fails on a segment.
+    """
+    waypoints = [np.asarray(w, float) for w in segments]
+    n = waypoints[0].shape[1] if waypoints and waypoints[0].ndim == 2 else 0
+    vmax = positive_limits(velocity_limit, n, "velocity_limit")
+    amax = positive_limits(acceleration_limit, n, "acceleration_limit")
+    jmax = positive_limits(jerk_limit, n, "jerk_limit")
+    bounds = None if position_bounds is None else as_bounds(position_bounds)
+    lone = len(waypoints) == 1 and waypoints[0].shape[0] == 1
+    built = None if lone else capture_path(waypoints, bounds)
+    motions = {} if built is None else _capture_motions(*built, (vmax, amax, jmax), light_positions, center, exposure)
+
+    def segment(index: int, w: Array, n: int) -> JerkLimitedMotion | None:
+        if 0 <= index < len(waypoints) and not lone:
+            return motions.get(index)
+        chord = chord_path(w, bounds)  # the approach or the retreat, rest to rest
+        if chord is None:
+            return None
+        path = CubicSpline(chord[0], chord[1], bc_type="not-a-knot")
+        return JerkLimitedMotion(path, path_bounds(derivative_maxima(path), float(chord[0][-1]), vmax, amax, jmax), index)
+
+    return assemble_trajectory(waypoints, 0.0, segment, joint_names, approach=approach, retreat=retreat)
+
+
+def _capture_motions(
+    path: CubicSpline,
+    landmark: NDArray[np.intp],
+    limits: tuple[Array, Array, Array],
+    light_positions: LightPositions,
+    center: ArrayLike,
+    exposure: Exposure,
+) -> dict[int, JerkLimitedMotion]:
+    """The timed motion of each segment with motion, by segment index (module docstring)."""
+    pieces = {
+        i: _restriction(path, int(a), int(b)) for i, (a, b) in enumerate(zip(landmark[:-1], landmark[1:], strict=True)) if b > a
+    }
+    bounds = {i: path_bounds(derivative_maxima(p), float(p.x[-1]), *limits) for i, p in pieces.items()}
+    speed = capture_speed_caps(path, path.x[landmark], light_positions, center, exposure)
+    speed[0] = speed[-1] = 0.0
+    for k in range(1, landmark.size - 1):
+        around = [bounds[i][0] for i in (k - 1, k) if i in bounds]
+        speed[k] = min([speed[k], *around]) if len(around) == 2 else 0.0  # a landmark twice: at rest
+    for _ in range(MAX_SPEED_HALVINGS + 1):
+        motions: dict[int, JerkLimitedMotion] = {}
+        failed = []
+        for i, p in pieces.items():
+            try:
+                motions[i] = JerkLimitedMotion(p, bounds[i], i, speeds=(float(speed[i]), float(speed[i + 1])))
+            except SolverError:
+                failed.append(i)
+        if not failed:
+            return motions
+        for i in failed:  # a changed end speed also changes the neighbour's: all are timed again
+            speed[i : i + 2] *= 0.5
+    raise SolverError(
+        f"segments {failed}: no jerk-limited profile between the capture speeds, even "
+        f"{2**MAX_SPEED_HALVINGS}× slower (ruckig)"
+    )
