@@ -103,7 +103,13 @@ class Plan:
         first capture and back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
         (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
         paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
-        moves from and to the start."""
+        moves from and to the start.
+
+        With flying captures also ``flying_s``, the bound of a motion that does not stop at its
+        captures: the rest-to-rest moves from and to the start plus, between consecutive captures,
+        max_j |Δq_j| / v_max,j (no joint can be faster than its velocity limit, whatever the path and
+        whatever the speeds at the captures; the accelerations and the blur speeds are left out, so
+        the bound is loose), and ``flying_ratio`` = moving time / flying_s."""
         trajectory, limits = self.trajectory, self.setup.limits
         intervals = trajectory.landmark_intervals
         approach = bool(intervals[0, 0] > 0)
@@ -116,13 +122,19 @@ class Plan:
         inner = moves[int(approach) : moves.size - int(retreat)]
         segments = trajectory.segment_times
         bound = float(moves.sum())
-        return {
+        out = {
             "motion_time_s": self.motion_time,
             "rest_to_rest_s": bound,
             "ratio": self.motion_time / bound if bound > 0 else 1.0,
             "between_captures_s": float(np.sum(segments[:, 1] - segments[:, 0])),
             "between_captures_rest_to_rest_s": float(inner.sum()),
         }
+        if self.problem.trajectory.capture == "flying":
+            # between the captures no stop: every joint at most at its velocity limit the whole way
+            cruise = np.max(np.abs(np.diff(q[1:-1], axis=0)) / limits.velocity, axis=1, initial=0.0)
+            flying = float(moves.sum() - inner.sum() + cruise.sum())
+            out |= {"flying_s": flying, "flying_ratio": self.motion_time / flying if flying > 0 else 1.0}
+        return out
 
     @property
     def light_directions_camera(self) -> Array:

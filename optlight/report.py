@@ -195,6 +195,15 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         f"| moving time / rest-to-rest bound (time-optimal stops at the same postures) | "
         f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['rest_to_rest_s']:.2f} s "
         f"({s['motion_bound']['ratio']:.2f}×) |",
+        *(
+            [
+                f"| moving time / flying bound (no stops; each joint at its velocity limit between the captures) | "
+                f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['flying_s']:.2f} s "
+                f"({s['motion_bound']['flying_ratio']:.2f}×) |"
+            ]
+            if "flying_s" in s["motion_bound"]
+            else []
+        ),
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
         f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
