@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 from optlight.errors import SolverError
-from optlight.motion import Exposure, Trajectory, assemble_trajectory, positive_limits
+from optlight.motion import Exposure, Piece, Trajectory, assemble_trajectory, positive_limits
 from optlight.planning.chord import MAX_BULGE_REFINEMENTS, as_bounds, chord_path, spline_position_range
 from optlight.planning.jerk import JerkLimitedMotion, derivative_maxima, path_bounds
 from optlight.spec.trajectory import TrajectorySpec
@@ -54,6 +54,9 @@ LightPositions = Callable[[Array], Array]
 SPEED_MARGIN = 0.9
 #: Largest number of times the end speeds of a segment are halved when ruckig finds no profile.
 MAX_SPEED_HALVINGS = 30
+#: Fraction of a path piece's length its speed change is planned within (ruckig's profile then
+#: exists with room to spare).
+LENGTH_MARGIN = 0.95
 #: Step (rad of chord parameter) of the central difference of the light's position along the path.
 FK_STEP = 1e-6
 
@@ -161,7 +164,7 @@ def flying_timing(
     built = None if lone else capture_path(waypoints, bounds)
     motions = {} if built is None else _capture_motions(*built, (vmax, amax, jmax), light_positions, center, exposure)
 
-    def segment(index: int, w: Array, n: int) -> JerkLimitedMotion | None:
+    def segment(index: int, w: Array, n: int) -> Piece | None:
         if 0 <= index < len(waypoints) and not lone:
             return motions.get(index)
         chord = chord_path(w, bounds)  # the approach or the retreat, rest to rest
@@ -180,30 +183,88 @@ def _capture_motions(
     light_positions: LightPositions,
     center: ArrayLike,
     exposure: Exposure,
-) -> dict[int, JerkLimitedMotion]:
+) -> dict[int, Piece]:
     """The timed motion of each segment with motion, by segment index (module docstring)."""
-    pieces = {
-        i: _restriction(path, int(a), int(b)) for i, (a, b) in enumerate(zip(landmark[:-1], landmark[1:], strict=True)) if b > a
-    }
-    bounds = {i: path_bounds(derivative_maxima(p), float(p.x[-1]), *limits) for i, p in pieces.items()}
-    speed = capture_speed_caps(path, path.x[landmark], light_positions, center, exposure)
-    speed[0] = speed[-1] = 0.0
-    for k in range(1, landmark.size - 1):
-        around = [bounds[i][0] for i in (k - 1, k) if i in bounds]
-        speed[k] = min([speed[k], *around]) if len(around) == 2 else 0.0  # a landmark twice: at rest
+    x = np.asarray(path.x, float)
+    pieces = [_restriction(path, k, k + 1) for k in range(x.size - 1)]
+    segment_of = np.searchsorted(landmark, np.arange(x.size - 1), side="right") - 1
+    segment_length = x[landmark[1:]] - x[landmark[:-1]]
+    bounds = np.array(
+        [
+            path_bounds(derivative_maxima(p), float(segment_length[segment_of[k]]), *limits)
+            for k, p in enumerate(pieces)
+        ]
+    )  # (P, 3): V, A, J of each piece
+    speed = np.minimum(np.r_[0.0, bounds[:, 0]], np.r_[bounds[:, 0], 0.0])  # the ends at rest
+    caps = capture_speed_caps(path, x[landmark[1:-1]], light_positions, center, exposure)
+    speed[landmark[1:-1]] = np.minimum(speed[landmark[1:-1]], caps)
+    speed = _reachable(speed, np.diff(x), bounds)
     for _ in range(MAX_SPEED_HALVINGS + 1):
-        motions: dict[int, JerkLimitedMotion] = {}
+        motions: list[JerkLimitedMotion] = []
         failed = []
-        for i, p in pieces.items():
+        for k, p in enumerate(pieces):
             try:
-                motions[i] = JerkLimitedMotion(p, bounds[i], i, speeds=(float(speed[i]), float(speed[i + 1])))
+                motions.append(JerkLimitedMotion(p, tuple(bounds[k]), k, speeds=(float(speed[k]), float(speed[k + 1]))))
             except SolverError:
-                failed.append(i)
+                failed.append(k)
         if not failed:
-            return motions
-        for i in failed:  # a changed end speed also changes the neighbour's: all are timed again
-            speed[i : i + 2] *= 0.5
+            return {
+                i: _Chain(motions[a:b]) for i, (a, b) in enumerate(zip(landmark[:-1], landmark[1:], strict=True)) if b > a
+            }
+        for k in failed:  # a changed end speed also changes the neighbour's: all are timed again
+            speed[k : k + 2] *= 0.5
     raise SolverError(
-        f"segments {failed}: no jerk-limited profile between the capture speeds, even "
+        f"path pieces {failed}: no jerk-limited profile between the path speeds, even "
         f"{2**MAX_SPEED_HALVINGS}× slower (ruckig)"
     )
+
+
+def _reachable(speed: Array, length: Array, bounds: Array) -> Array:
+    """The largest path speeds at the knots, at most ``speed`` (K,), such that every piece k
+    (``length`` (K − 1,), ``bounds`` (K − 1, 3)) can change from one end speed to the other within
+    :data:`LENGTH_MARGIN` of its length (:func:`speed_change_distance`): a forward pass, then a
+    backward one."""
+    c = speed.copy()
+    for k in range(c.size - 1):
+        c[k + 1] = min(c[k + 1], _fastest(c[k], LENGTH_MARGIN * length[k], *bounds[k, 1:]))
+    for k in range(c.size - 2, -1, -1):
+        c[k] = min(c[k], _fastest(c[k + 1], LENGTH_MARGIN * length[k], *bounds[k, 1:]))
+    return c
+
+
+def speed_change_distance(u: float, w: float, a: float, j: float) -> float:
+    """Distance (rad) the path covers while its speed changes from u to w (rad/s) as fast as
+    |s̈| ≤ a and |s⃛| ≤ j allow, s̈ = 0 at both ends: (u + w)/2 · T, the profile being symmetric, with
+    T = Δ/a + a/j when Δ = |w − u| ≥ a²/j (a is reached), else 2 √(Δ/j)."""
+    d = abs(w - u)
+    t = d / a + a / j if d >= a * a / j else 2.0 * np.sqrt(d / j)
+    return 0.5 * (u + w) * t
+
+
+def _fastest(u: float, length: float, a: float, j: float) -> float:
+    """The largest speed w ≥ u reachable from u within ``length`` (:func:`speed_change_distance`,
+    increasing in w), by bisection."""
+    lo, hi = u, u + 1.0
+    while speed_change_distance(u, hi, a, j) <= length:
+        lo, hi = hi, 2.0 * hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if speed_change_distance(u, mid, a, j) <= length else (lo, mid)
+    return lo
+
+
+class _Chain:
+    """Pieces one after another, as one piece (a segment timed piece by piece)."""
+
+    def __init__(self, pieces: Sequence[Piece]) -> None:
+        self._trajectory = Trajectory(pieces, np.zeros((0, 2)), np.zeros((0, 2)))
+
+    @property
+    def duration(self) -> float:
+        return self._trajectory.duration
+
+    def evaluate(self, t: Array) -> tuple[Array, Array, Array]:
+        return self._trajectory.sample(t)
+
+    def jerk(self, t: Array) -> Array:
+        return self._trajectory.jerk(t)
