@@ -59,6 +59,7 @@ from optlight.planning.policy import (
     Reacher,
     knot_ik,
     place_landmarks,
+    tour_costs,
     visiting_order,
 )
 from optlight.planning.set_landmarks import (
@@ -148,7 +149,11 @@ def solve(
     notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design is not None else visiting_order(setup, placement)
+        order = (
+            tour_order(placement.thetas, tour_costs(setup, placement.thetas))
+            if design is not None
+            else visiting_order(setup, placement)
+        )
         visited = tuple(placement.landmarks[i] for i in order)
         landmark_thetas = placement.thetas[order]
         path = capture_path(setup, np.array([lm.position for lm in visited]), landmark_thetas)

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK
 from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
+from optlight.planning.jerk import rest_to_rest_duration
 from optlight.planning.landmarks import Landmark, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
@@ -333,11 +334,24 @@ def _follow_back(reacher: Reacher, landmarks: Sequence[Landmark], thetas: Array)
 
 
 def visiting_order(setup: Setup, placement: LandmarkPlacement) -> NDArray[np.int64]:
-    """Azimuth order, or a short open tour in joint space (``[trajectory] order``)."""
+    """Azimuth order, or a short open tour on :func:`tour_costs` (``[trajectory] order``)."""
     if setup.trajectory_spec.order == "tour":
-        thetas = placement.thetas
-        return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
+        return shortest_open_tour(tour_costs(setup, placement.thetas))
     return azimuth_order([lm.azimuth for lm in placement.landmarks])
+
+
+def tour_costs(setup: Setup, thetas: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(M, M) what a capture tour through the postures ``thetas`` (M, n) minimises between two of them:
+    the joint-space distance |θ_a − θ_b|₂ (rad) when the robot stops at each capture; with flying
+    captures (``[trajectory] capture``) the time (s) of the move, estimated as the slowest joint's
+    time-optimal rest-to-rest move under the velocity, acceleration and jerk limits
+    (:func:`~optlight.planning.jerk.rest_to_rest_duration`): a flying acquisition spends time, and a
+    joint far from its limits costs less than its share of the distance."""
+    step = np.abs(thetas[:, None, :] - thetas[None, :, :])
+    if setup.trajectory_spec.capture != "flying":
+        return np.linalg.norm(step, axis=2)
+    limits = setup.limits
+    return rest_to_rest_duration(step, limits.velocity, limits.acceleration, limits.jerk).max(axis=2)
 
 
 def knot_ik(setup: Setup, path: LightPath, landmark_thetas: Array) -> tuple[Array, NDArray[np.int64]]:
