@@ -54,6 +54,13 @@ LightPositions = Callable[[Array], Array]
 SPEED_MARGIN = 0.9
 #: Largest number of times the end speeds of a segment are halved when ruckig finds no profile.
 MAX_SPEED_HALVINGS = 30
+#: Pieces each knot interval of the capture path is timed in: the derivative maxima of a shorter
+#: piece are smaller, so the path speed follows the curvature more closely.
+SUBDIVISIONS = 4
+#: Length, in lengths of its segment, over which a piece's bounds are chosen for the shortest
+#: rest-to-rest duration (:func:`~optlight.planning.jerk.path_bounds`): longer favours speed over
+#: acceleration, as passing through a landmark does.
+REFERENCE_LENGTHS = 4.0
 #: Fraction of a path piece's length its speed change is planned within (ruckig's profile then
 #: exists with room to spare).
 LENGTH_MARGIN = 0.95
@@ -98,9 +105,19 @@ def _chord(w: Array) -> Array:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
 
 
-def _restriction(path: CubicSpline, a: int, b: int) -> CubicSpline:
-    """The spline on knots a … b, its parameter shifted to start at 0."""
-    return CubicSpline.construct_fast(path.c[:, a:b].copy(), path.x[a : b + 1] - path.x[a])
+def _subdivided(knots: Array, parts: int) -> Array:
+    """The knots with every interval cut into ``parts`` equal intervals."""
+    fractions = np.arange(parts) / parts
+    inner = knots[:-1, None] + np.diff(knots)[:, None] * fractions[None]
+    return np.append(inner.ravel(), knots[-1])
+
+
+def _between(path: CubicSpline, a: float, b: float) -> CubicSpline:
+    """The spline on [a, b] (inside one of its intervals) as a one-interval spline on [0, b − a]:
+    the cubic's Taylor coefficients at a."""
+    d = [np.asarray(path(a, nu), float) for nu in range(4)]
+    c = np.stack([d[3] / 6.0, d[2] / 2.0, d[1], d[0]])[:, None, :]
+    return CubicSpline.construct_fast(c, np.array([0.0, b - a]))
 
 
 def capture_speed_caps(
@@ -185,15 +202,14 @@ def _capture_motions(
     exposure: Exposure,
 ) -> dict[int, Piece]:
     """The timed motion of each segment with motion, by segment index (module docstring)."""
-    x = np.asarray(path.x, float)
-    pieces = [_restriction(path, k, k + 1) for k in range(x.size - 1)]
+    knots = np.asarray(path.x, float)
+    x = _subdivided(knots, SUBDIVISIONS)
+    landmark = landmark * SUBDIVISIONS
+    pieces = [_between(path, a, b) for a, b in zip(x[:-1], x[1:], strict=True)]
     segment_of = np.searchsorted(landmark, np.arange(x.size - 1), side="right") - 1
-    segment_length = x[landmark[1:]] - x[landmark[:-1]]
+    reference = REFERENCE_LENGTHS * (x[landmark[1:]] - x[landmark[:-1]])
     bounds = np.array(
-        [
-            path_bounds(derivative_maxima(p), float(segment_length[segment_of[k]]), *limits)
-            for k, p in enumerate(pieces)
-        ]
+        [path_bounds(derivative_maxima(p), float(reference[segment_of[k]]), *limits) for k, p in enumerate(pieces)]
     )  # (P, 3): V, A, J of each piece
     speed = np.minimum(np.r_[0.0, bounds[:, 0]], np.r_[bounds[:, 0], 0.0])  # the ends at rest
     caps = capture_speed_caps(path, x[landmark[1:-1]], light_positions, center, exposure)
