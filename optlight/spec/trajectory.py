@@ -58,8 +58,8 @@ class TrajectorySpec:
     )
     exposure_s: float = key(
         0.005,
-        "the camera's exposure time, centred on each trigger (flying captures: the time over which the "
-        "light's motion blurs the image)",
+        "the camera's exposure time: it starts at the trigger after a stop and is centred on it on the fly "
+        "(captures.csv gives each exposure's start and end)",
         unit="s",
         lo=0.0,
         lo_open=True,
