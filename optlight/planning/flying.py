@@ -20,15 +20,20 @@ of T s the light moves about v T and turns about ω T, so the path speed at land
 most J T²/8 around a landmark, where s̈ = 0). The first and the last capture are taken at rest (the
 approach ends and the retreat starts there).
 
-**Timing.** Segment i (landmark i to i+1) is the spline's restriction to [s_i, s_{i+1}], timed by the
-jerk-limited profile of :mod:`optlight.planning.jerk`: bounds (V_i, A_i, J_i) from the segment's
-derivative maxima (so every joint keeps its limits wherever ṡ ≤ V_i), and ruckig's time-optimal
-profile from (ṡ, s̈) = (c_i, 0) to (c_{i+1}, 0), c_k also at most the V of both segments around it.
-At a landmark both profiles have ṡ = c_k and s̈ = 0, so q̇ = q′ṡ and q̈ = q″ṡ² + q′s̈ are continuous.
-Where ruckig finds no profile without reversing (a short segment between speeds too different), both
-of its end speeds are halved and the path timed again. The bounds are chosen for the rest-to-rest
-duration (:func:`~optlight.planning.jerk.path_bounds`): sound, not the fastest profile with these end
-speeds.
+**Timing.** The path is cut at its knots, each knot interval in :data:`SUBDIVISIONS` pieces. Each
+piece k gets its own bounds (V_k, A_k, J_k) from its derivative maxima
+(:func:`~optlight.planning.jerk.path_bounds`, so every joint keeps its limits wherever ṡ ≤ V_k on
+it) and is timed by ruckig's time-optimal jerk-limited profile from (ṡ, s̈) = (c_k, 0) to
+(c_{k+1}, 0), ṡ ≥ 0. At a cut both pieces have ṡ = c_k and s̈ = 0, so q̇ = q′ṡ and q̈ = q″ṡ² + q′s̈
+are continuous. The cut speeds: c_k at most the V of both pieces around it, 0 at the ends, at most
+the blur cap at a landmark, then lowered by a forward and a backward pass until every piece can
+change from one end speed to the other within :data:`LENGTH_MARGIN` of its length
+(:func:`speed_change_distance`). Where ruckig still finds no profile, both end speeds of the piece
+are halved and the path timed again. A piece's bounds are the shortest rest-to-rest profile over
+:data:`REFERENCE_LENGTHS` lengths of its segment: a choice, sound whatever it is, that favours speed
+over acceleration; the bounds follow the path's curvature piece by piece, which is what makes the
+motion faster than stopping (one profile per segment, as the stop mode times it, is limited
+everywhere by the segment's sharpest point, and a corner of the joint path sits at every landmark).
 """
 
 from __future__ import annotations
@@ -41,18 +46,24 @@ from scipy.interpolate import CubicSpline
 
 from optlight.errors import SolverError
 from optlight.motion import Exposure, Piece, Trajectory, assemble_trajectory, positive_limits
-from optlight.planning.chord import MAX_BULGE_REFINEMENTS, as_bounds, chord_path, spline_position_range
+from optlight.planning.chord import (
+    MAX_BULGE_REFINEMENTS,
+    as_bounds,
+    chord_parameter,
+    chord_path,
+    spline_position_range,
+)
 from optlight.planning.jerk import JerkLimitedMotion, derivative_maxima, path_bounds
 from optlight.spec.trajectory import TrajectorySpec
 
-__all__ = ["SPEED_MARGIN", "capture_speed_caps", "exposure_of", "flying_timing"]
+__all__ = ["SPEED_MARGIN", "capture_speed_caps", "exposure_of", "flying_path", "flying_timing", "speed_change_distance"]
 
 Array = NDArray[np.float64]
 LightPositions = Callable[[Array], Array]
 
 #: Fraction of the blur-limited path speed planned at a capture (module docstring).
 SPEED_MARGIN = 0.9
-#: Largest number of times the end speeds of a segment are halved when ruckig finds no profile.
+#: Largest number of times the end speeds of a piece are halved when ruckig finds no profile.
 MAX_SPEED_HALVINGS = 30
 #: Pieces each knot interval of the capture path is timed in: the derivative maxima of a shorter
 #: piece are smaller, so the path speed follows the curvature more closely.
@@ -73,7 +84,7 @@ def exposure_of(spec: TrajectorySpec) -> Exposure:
     return Exposure(spec.exposure_s, np.deg2rad(spec.blur_deg), spec.blur_mm * 1e-3)
 
 
-def capture_path(
+def flying_path(
     segments: Sequence[Array], position_bounds: tuple[Array, Array] | None
 ) -> tuple[CubicSpline, NDArray[np.intp]] | None:
     """The spline q(s) through every segment's knots (module docstring) and the knot index of each of
@@ -91,18 +102,13 @@ def capture_path(
     index = np.asarray(landmark, np.intp)
     lower, upper = position_bounds if position_bounds is not None else (-np.inf, np.inf)
     for _ in range(MAX_BULGE_REFINEMENTS if position_bounds is not None else 0):
-        low, high = spline_position_range(_chord(w_all), w_all)
+        low, high = spline_position_range(chord_parameter(w_all), w_all)
         outside = np.flatnonzero(((low < lower) | (high > upper)).any(axis=1))
         if outside.size == 0:
             break
         w_all = np.insert(w_all, outside + 1, 0.5 * (w_all[outside] + w_all[outside + 1]), axis=0)
         index = index + np.searchsorted(outside, index, side="left")
-    return CubicSpline(_chord(w_all), w_all, bc_type="not-a-knot"), index
-
-
-def _chord(w: Array) -> Array:
-    """Cumulative chord parameter (K,) of waypoints (K, n)."""
-    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
+    return CubicSpline(chord_parameter(w_all), w_all, bc_type="not-a-knot"), index
 
 
 def _subdivided(knots: Array, parts: int) -> Array:
@@ -178,7 +184,7 @@ def flying_timing(
     jmax = positive_limits(jerk_limit, n, "jerk_limit")
     bounds = None if position_bounds is None else as_bounds(position_bounds)
     lone = len(waypoints) == 1 and waypoints[0].shape[0] == 1
-    built = None if lone else capture_path(waypoints, bounds)
+    built = None if lone else flying_path(waypoints, bounds)
     motions = {} if built is None else _capture_motions(*built, (vmax, amax, jmax), light_positions, center, exposure)
 
     def segment(index: int, w: Array, n: int) -> Piece | None:
