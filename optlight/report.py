@@ -236,7 +236,9 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         "- `joint_trajectory.yaml` (ROS 2 JointTrajectory) and `trajectory.csv`: the motion; "
         "`captures.csv`: per capture the camera trigger (`trigger_s`), the image name, the light's "
         "`zenith_deg` and `azimuth_deg` (the angles `optlight render --zenith --azimuth` takes), its "
-        "direction, its position (`light_position_*_m`, world frame, m) and the joint angles.",
+        "direction, its position (`light_position_*_m`, world frame, m), the joint angles, the exposure "
+        "(`exposure_start_s`, `exposure_end_s`: start the camera's exposure at the first) and the blur the "
+        "motion gives it (`blur_deg` about the object's centre, `blur_mm`).",
         f"- Light directions ({holders}): {LIGHT_FRAME}.",
         "- Image names: the same in every file that names the images.",
         "",
