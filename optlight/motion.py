@@ -4,9 +4,10 @@ each (docs/design.md §6).
 Every stage after the timing sees only this type: the verification, the exports, the figures and the
 preview. A trajectory is a sequence of pieces (a dwell, the motion along a segment, samples read back
 from a CSV file, quintic Hermite polynomials through given points), each evaluated in its own local
-time. The timing laws build the motion pieces: TOPPRA (:mod:`optlight.planning.timing`) and
-jerk-limited (:mod:`optlight.planning.jerk`), both through :func:`assemble_trajectory`, which joins
-[approach,] dwell, motion, dwell, …, dwell[, retreat].
+time. The timing laws build the motion pieces: TOPPRA (:mod:`optlight.planning.timing`),
+jerk-limited (:mod:`optlight.planning.jerk`) and flying (:mod:`optlight.planning.flying`, dwells of
+zero length), all through :func:`assemble_trajectory`, which joins [approach,] dwell, motion, dwell,
+…, dwell[, retreat]. :class:`Exposure` is the camera's exposure and the blur a capture tolerates.
 """
 
 from __future__ import annotations
@@ -177,11 +178,13 @@ class Exposure:
 
 
 class Trajectory:
-    """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark.
+    """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark for
+    a dwell, or passing it (a dwell of zero length: flying captures,
+    :func:`~optlight.planning.flying.flying_timing`).
 
     Attributes (all times in seconds from the start):
         landmark_intervals: (M, 2) start and end of the dwell at each landmark.
-        capture_times: (M,) middle of each dwell, when the image is exposed.
+        capture_times: (M,) middle of each dwell (the instant of a flying capture).
         segment_times: (M−1, 2) start and end of the motion from landmark i to landmark i+1
             (start = end for a segment without motion).
         joint_names: names of the n joints, or None.
