@@ -7,7 +7,8 @@ chord parameter s (rad), the landmarks among its knots (each segment's waypoints
 kept within the joint bounds by :func:`~optlight.planning.chord.chord_path`, the whole spline then
 kept within them the same way). Unlike the stop mode's spline per segment, it is C² through the
 landmarks: q′ and q″ have no corner there, so the robot can pass a landmark at a non-zero speed with
-continuous q̇ and q̈.
+continuous q̇ and q̈. Where the joint path turns sharply at a landmark (:data:`CORNER_DEG`) the path
+is split into two such splines and the arm passes that landmark at rest.
 
 **Speed at a capture.** With p(q) the light's position and O the object's centre, the light moves at
 v = |p′(s)| ṡ (m/s) and turns about O at ω = |(I − d dᵀ) p′(s)| ṡ / |p − O| (rad/s),
@@ -56,7 +57,7 @@ from optlight.planning.chord import (
 from optlight.planning.jerk import JerkLimitedMotion, derivative_maxima, path_bounds
 from optlight.spec.trajectory import TrajectorySpec
 
-__all__ = ["SPEED_MARGIN", "capture_speed_caps", "exposure_of", "flying_path", "flying_timing", "speed_change_distance"]
+__all__ = ["CORNER_DEG", "SPEED_MARGIN", "capture_speed_caps", "corner_runs", "exposure_of", "flying_path", "flying_timing", "speed_change_distance"]
 
 Array = NDArray[np.float64]
 LightPositions = Callable[[Array], Array]
@@ -72,6 +73,10 @@ SUBDIVISIONS = 4
 #: rest-to-rest duration (:func:`~optlight.planning.jerk.path_bounds`): longer favours speed over
 #: acceleration, as passing through a landmark does.
 REFERENCE_LENGTHS = 4.0
+#: Landmarks where the joint path turns by more than this (deg) are passed at rest
+#: (:func:`corner_runs`): a C² spline through a sharp corner bends over whole knot intervals around
+#: it and would slow the motion there more than a stop does.
+CORNER_DEG = 60.0
 #: Fraction of a path piece's length its speed change is planned within (ruckig's profile then
 #: exists with room to spare).
 LENGTH_MARGIN = 0.95
@@ -82,6 +87,20 @@ FK_STEP = 1e-6
 def exposure_of(spec: TrajectorySpec) -> Exposure:
     """The exposure and blur tolerances of a problem's ``[trajectory]`` (in s, rad and m)."""
     return Exposure(spec.exposure_s, np.deg2rad(spec.blur_deg), spec.blur_mm * 1e-3)
+
+
+def corner_runs(segments: Sequence[Array]) -> list[tuple[int, int]]:
+    """The segments as runs [first, last) split at every landmark where the joint path turns by more
+    than :data:`CORNER_DEG` (the angle between the last chord of the segment ending there and the
+    first chord of the next): there the arm stops, each run gets its own spline."""
+    cuts = [0]
+    for k in range(1, len(segments)):
+        before, after = segments[k - 1][-1] - segments[k - 1][-2], segments[k][1] - segments[k][0]
+        norms = np.linalg.norm(before) * np.linalg.norm(after)
+        if norms > 0 and np.dot(before, after) < np.cos(np.deg2rad(CORNER_DEG)) * norms:
+            cuts.append(k)
+    cuts.append(len(segments))
+    return list(zip(cuts[:-1], cuts[1:], strict=True))
 
 
 def flying_path(
@@ -184,8 +203,12 @@ def flying_timing(
     jmax = positive_limits(jerk_limit, n, "jerk_limit")
     bounds = None if position_bounds is None else as_bounds(position_bounds)
     lone = len(waypoints) == 1 and waypoints[0].shape[0] == 1
-    built = None if lone else flying_path(waypoints, bounds)
-    motions = {} if built is None else _capture_motions(*built, (vmax, amax, jmax), light_positions, center, exposure)
+    motions: dict[int, Piece] = {}
+    for first, last in [] if lone else corner_runs(waypoints):
+        built = flying_path(waypoints[first:last], bounds)
+        if built is not None:
+            timed = _capture_motions(*built, (vmax, amax, jmax), light_positions, center, exposure)
+            motions |= {first + i: motion for i, motion in timed.items()}
 
     def segment(index: int, w: Array, n: int) -> Piece | None:
         if 0 <= index < len(waypoints) and not lone:

@@ -16,7 +16,7 @@ from conftest import reduced_problem
 
 import optlight
 from optlight.motion import Exposure
-from optlight.planning.flying import flying_timing, speed_change_distance
+from optlight.planning.flying import corner_runs, flying_timing, speed_change_distance
 from optlight.planning.jerk import rest_to_rest_moves
 from optlight.planning.policy import tour_costs
 from optlight.verify import verify_trajectory
@@ -74,7 +74,9 @@ def test_flying_plan_verifies_without_stopping(flying_plan: optlight.Plan) -> No
     qd = trajectory.sample(trajectory.capture_times)[1]
     speed = np.linalg.norm(qd, axis=1)
     assert speed[0] == speed[-1] == 0.0  # the approach ends and the retreat starts at rest
-    assert np.all(speed[1:-1] > 0.05)  # the interior captures are passed, not stopped at
+    inner = speed[1:-1]
+    assert np.all((inner > 0.05) | (inner == 0.0))  # passed at speed, or at rest at a sharp corner
+    assert np.count_nonzero(inner) >= inner.size / 2
 
 
 def test_blur_by_dense_resampling_within_tolerance(flying_plan: optlight.Plan) -> None:
@@ -166,7 +168,8 @@ def test_verification_fails_a_blur_above_tolerance(flying_plan: optlight.Plan) -
         exposure=Exposure(EXPOSURE_S, np.deg2rad(0.001), 1e-5),
     )
     assert not report.passed
-    assert report.checks["blur_angle"].failing_samples == len(flying_plan.visited) - 2  # the two at rest pass
+    moving = np.linalg.norm(flying_plan.trajectory.sample(flying_plan.trajectory.capture_times)[1], axis=1) > 0
+    assert report.checks["blur_angle"].failing_samples == np.count_nonzero(moving) > 0  # those at rest pass
     assert any(v.check == "blur_distance" for v in report.violations)
 
 
@@ -204,7 +207,8 @@ def test_tour_costs_are_ruckig_move_times(flying_plan: optlight.Plan) -> None:
 VMAX = np.array([1.0, 1.5, 0.8])
 AMAX = np.array([3.0, 2.0, 4.0])
 JMAX = np.array([30.0, 20.0, 40.0])
-LANDMARKS = np.array([[0.0, 0.0, 0.0], [0.8, -0.5, 0.3], [0.9, 0.4, -0.6], [1.6, 0.1, 0.0], [1.0, 0.9, 0.5]])
+#: Landmarks on a helix: the joint path turns by about 25° at each.
+LANDMARKS = np.array([[np.cos(a), np.sin(a), 0.3 * a] for a in np.linspace(0.0, 2.0, 5)])
 
 
 def _segments(k: int = 8) -> list[np.ndarray]:
@@ -252,3 +256,26 @@ def test_speed_change_distance_matches_ruckig() -> None:
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = [10.0], [a], [j]
         otg.calculate(inp, out)
         assert speed_change_distance(u, w, a, j) == pytest.approx(out.at_time(out.duration)[0][0], rel=1e-6, abs=1e-12)
+
+
+def test_sharp_corner_is_passed_at_rest() -> None:
+    """A joint path that turns by 90° at a landmark is split there and the arm stops; a 20° turn is
+    passed at speed."""
+    s = np.linspace(0.0, 1.0, 6)[:, None]
+    points = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.5, 0.5, 0.0], [0.5 + 0.5 * np.sin(0.35), 0.5 + 0.5 * np.cos(0.35), 0.0]])
+    segments = [a + (b - a) * s for a, b in zip(points[:-1], points[1:], strict=True)]
+    assert corner_runs(segments) == [(0, 1), (1, 3)]
+    trajectory = flying_timing(
+        segments,
+        VMAX,
+        AMAX,
+        JMAX,
+        light_positions=lambda q: np.asarray(q, float)[:, :3],
+        center=np.array([100.0, 0.0, 0.0]),
+        exposure=Exposure(0.01, np.pi, 2e-3),
+    )
+    speed = np.linalg.norm(trajectory.sample(trajectory.capture_times)[1], axis=1)
+    assert speed[1] == 0.0 and speed[2] > 0.0
+    t = np.linspace(0.0, trajectory.duration, 50_001)
+    _, qd, qdd = trajectory.sample(t)
+    assert np.all(np.abs(qd) <= VMAX * (1 + 1e-9)) and np.all(np.abs(qdd) <= AMAX * (1 + 1e-9))
