@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
 from optlight.motion import Trajectory
-from optlight.planning.jerk import rest_to_rest_moves
+from optlight.planning.jerk import nonstop_bound, rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
@@ -105,11 +105,11 @@ class Plan:
         paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
         moves from and to the start.
 
-        With flying captures also ``flying_s``, the bound of a motion that does not stop at its
-        captures: the rest-to-rest moves from and to the start plus, between consecutive captures,
-        max_j |Δq_j| / v_max,j (no joint can be faster than its velocity limit, whatever the path and
-        whatever the speeds at the captures; the accelerations and the blur speeds are left out, so
-        the bound is loose), and ``flying_ratio`` = moving time / flying_s."""
+        With flying captures also ``flying_s``, a bound for any motion through the same postures in
+        the same order that need not stop at them (:func:`~optlight.planning.jerk.nonstop_bound`:
+        the joints' velocity limits on every move, and each joint's stops where its own positions
+        turn; the jerk limit and the blur speeds are left out, so it is loose), and ``flying_ratio``
+        = moving time / flying_s."""
         trajectory, limits = self.trajectory, self.setup.limits
         intervals = trajectory.landmark_intervals
         approach = bool(intervals[0, 0] > 0)
@@ -130,9 +130,7 @@ class Plan:
             "between_captures_rest_to_rest_s": float(inner.sum()),
         }
         if self.problem.trajectory.capture == "flying":
-            # between the captures no stop: every joint at most at its velocity limit the whole way
-            cruise = np.max(np.abs(np.diff(q[1:-1], axis=0)) / limits.velocity, axis=1, initial=0.0)
-            flying = float(moves.sum() - inner.sum() + cruise.sum())
+            flying = nonstop_bound(postures, limits.velocity, limits.acceleration)
             out |= {"flying_s": flying, "flying_ratio": self.motion_time / flying if flying > 0 else 1.0}
         return out
 

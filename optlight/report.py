@@ -197,7 +197,7 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         f"({s['motion_bound']['ratio']:.2f}×) |",
         *(
             [
-                f"| moving time / flying bound (no stops; each joint at its velocity limit between the captures) | "
+                f"| moving time / flying bound (any motion through the same postures, stopping only where a joint turns) | "
                 f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['flying_s']:.2f} s "
                 f"({s['motion_bound']['flying_ratio']:.2f}×) |"
             ]

@@ -133,6 +133,38 @@ def rest_to_rest_moves(
     return out
 
 
+def nonstop_bound(postures: ArrayLike, velocity_limit: ArrayLike, acceleration_limit: ArrayLike) -> float:
+    """A lower bound (s) on the time of any motion through the postures (P, n) (rad) in their order,
+    from rest at the first to rest at the last, whatever its path and its speeds at the postures in
+    between, under |q̇_j| ≤ v_j and |q̈_j| ≤ a_j: the larger of
+
+    - Σ_k max_j |q_{k+1,j} − q_{k,j}| / v_j: no joint moves faster than its limit on any move;
+    - max_j Σ_r T_j(D_r): where the sequence of joint j's positions turns, the joint reaches an
+      extremum at least as far, with zero velocity, so its motion holds rest-to-rest moves over at
+      least the distances D_r between consecutive turns (the first and last posture included), one
+      after the other, each taking at least T_j(D) = D/v_j + v_j/a_j when D ≥ v_j²/a_j, else 2√(D/a_j)
+      (bang-bang; the jerk limit is left out, since at a turn the acceleration need not be zero).
+    """
+    q = np.asarray(postures, float)
+    if q.ndim != 2 or q.shape[0] < 1:
+        raise ValueError(f"postures must be a (P, n) array, got shape {q.shape}")
+    vmax = positive_limits(velocity_limit, q.shape[1], "velocity_limit")
+    amax = positive_limits(acceleration_limit, q.shape[1], "acceleration_limit")
+    steps = np.diff(q, axis=0)
+    cruise = float(np.sum(np.max(np.abs(steps) / vmax, axis=1, initial=0.0)))
+    stops = 0.0
+    for j in range(q.shape[1]):
+        d = steps[:, j][steps[:, j] != 0.0]
+        if d.size == 0:
+            continue
+        run = np.concatenate([[0], np.cumsum(np.sign(d[1:]) != np.sign(d[:-1]))])  # run index per step
+        distance = np.abs(np.bincount(run, weights=d))
+        v, a = vmax[j], amax[j]
+        time = np.where(distance >= v * v / a, distance / v + v / a, 2.0 * np.sqrt(distance / a))
+        stops = max(stops, float(time.sum()))
+    return max(cruise, stops)
+
+
 def path_bounds(
     maxima: tuple[Array, Array, Array], length: float, vmax: Array, amax: Array, jmax: Array
 ) -> tuple[float, float, float]:

@@ -17,7 +17,7 @@ from conftest import reduced_problem
 import optlight
 from optlight.motion import Exposure
 from optlight.planning.flying import corner_runs, flying_timing, speed_change_distance
-from optlight.planning.jerk import rest_to_rest_moves
+from optlight.planning.jerk import nonstop_bound, rest_to_rest_moves
 from optlight.planning.policy import tour_costs
 from optlight.verify import verify_trajectory
 
@@ -178,6 +178,20 @@ def test_motion_bound_reports_the_flying_bound(flying_plan: optlight.Plan, stop_
     assert bound["flying_s"] <= bound["rest_to_rest_s"]
     assert bound["flying_ratio"] >= 1.0
     assert "flying_s" not in stop_plan.motion_bound()
+    # a bound for any motion through the postures: the stop plan's motion too
+    trajectory, limits = stop_plan.trajectory, stop_plan.setup.limits
+    postures = trajectory.sample(np.r_[0.0, trajectory.landmark_intervals[:, 0], trajectory.duration])[0]
+    assert nonstop_bound(postures, limits.velocity, limits.acceleration) <= stop_plan.motion_time
+
+
+def test_nonstop_bound_by_hand() -> None:
+    """One joint through 0, 1, 0.5, 2 rad (v = a = 1): it stops where it turns, so at least the
+    bang-bang times over 1, 0.5 and 1.5 rad, 2 + 2√0.5 + 2.5 s (more than the 3 s at full speed);
+    a second joint moving 4 rad on the first move makes the velocity bound 4 + 0.5 + 1.5 s win."""
+    q = np.array([[0.0], [1.0], [0.5], [2.0]])
+    assert nonstop_bound(q, 1.0, 1.0) == pytest.approx(2.0 + 2.0 * np.sqrt(0.5) + 2.5)
+    q2 = np.column_stack([q[:, 0], [0.0, 4.0, 4.0, 4.0]])
+    assert nonstop_bound(q2, [1.0, 1.0], [1.0, 100.0]) == pytest.approx(6.0)  # its stops: 4.01 s only
 
 
 def test_tour_costs_are_ruckig_move_times(flying_plan: optlight.Plan) -> None:
