@@ -189,6 +189,11 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
             "moving / rest-to-rest bound",
             f"{bound['motion_time_s']:.2f} / {bound['rest_to_rest_s']:.2f} s ({bound['ratio']:.2f}×)",
         ),
+        *(
+            [("moving / flying bound", f"{bound['motion_time_s']:.2f} / {bound['flying_s']:.2f} s ({bound['flying_ratio']:.2f}×)")]
+            if "flying_s" in bound
+            else []
+        ),
         ("peak torque / limit", _torque_cell(s["torque_peak_fraction"])),
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),

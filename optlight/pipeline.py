@@ -52,6 +52,7 @@ from optlight.errors import CaptureSolverError, SolverError
 from optlight.geometry import LightSphere
 from optlight.motion import Trajectory
 from optlight.plan import Plan
+from optlight.planning.flying import exposure_of, flying_timing
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
 from optlight.planning.lightsets import Grid, SetCost, grid_from_problem, set_cost_from_problem
@@ -62,6 +63,7 @@ from optlight.planning.policy import (
     Reacher,
     knot_ik,
     place_landmarks,
+    tour_costs,
     visiting_order,
 )
 from optlight.planning.set_landmarks import (
@@ -153,7 +155,11 @@ def solve(
     notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design is not None else visiting_order(trajectory_spec, placement)
+        order = (
+            tour_order(placement.thetas, tour_costs(trajectory_spec, cell.limits, placement.thetas))
+            if design is not None
+            else visiting_order(trajectory_spec, cell.limits, placement)
+        )
         visited = tuple(placement.landmarks[i] for i in order)
         landmark_thetas = placement.thetas[order]
         positions = np.array([lm.position for lm in visited])
@@ -542,7 +548,8 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits and, on the
+    dwell of ``dwell_s`` at every landmark (``[trajectory] capture = "flying"``: one jerk-limited motion
+    through the landmarks at their blur-limited speeds, :func:`~optlight.planning.flying.flying_timing`); each segment's spline within the joint limits and, on the
     sphere, within :data:`~optlight.planning.trajectory.PATH_DEVIATION_M` of the planned path
     (:func:`~optlight.planning.trajectory.follow_planned_path`); the whole motion slowed where its
     joint torques would exceed the robot's limits
@@ -564,6 +571,20 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     def timed(scale: float) -> Trajectory:
         """The motion timed with the limits scaled for the torques (planning/torque_scaling.py)."""
         v, a, j = np.sqrt(scale) * limits.velocity, scale * limits.acceleration, scale**1.5 * limits.jerk
+        if spec.capture == "flying":
+            return flying_timing(
+                segments,
+                v,
+                a,
+                j,
+                light_positions=setup.robot.light_positions,
+                center=setup.sphere.center,
+                exposure=exposure_of(spec),
+                joint_names=setup.robot.joint_names,
+                approach=approach,
+                retreat=retreat,
+                position_bounds=(limits.lower, limits.upper),
+            )
         timing: Callable[..., Trajectory] = (
             partial(jerk_limited_timing, segments, v, a, j)
             if spec.timing == "jerk_limited"
@@ -593,7 +614,7 @@ def verify_knots(
     (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
     where the light must stay outside the sphere, the environment by exact coal distances, the
     camera's view and the beam by exact ray casting at the captures, the joint torques (the lamp
-    included) against the robot's torque limits, and the quintic interpolation of the controller
+    included) against the robot's torque limits, the blur of every exposure, and the quintic interpolation of the controller
     ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
@@ -620,5 +641,7 @@ def verify_knots(
         ),
         waypoints=waypoints,
         dynamics=setup.dynamics,
+        exposure=exposure_of(spec),
+        exposure_windows=trajectory.exposure_windows(spec.settle_s, spec.exposure_s),
         rate_hz=max(1000.0, spec.rate_hz),
     )

@@ -18,6 +18,7 @@ from optlight.export import MANIFEST, lp_direction, lp_text, write_captures
 from optlight.jsondata import json_safe
 from optlight.plan import Plan
 from optlight.scene import Scene
+from optlight.verify import capture_exposures
 
 
 def write_round_plans(root: Path, plans: Sequence[Plan]) -> list[str]:
@@ -71,6 +72,9 @@ def write_captures_folder(folder: Path, plan: Plan, captures: Sequence[Capture])
         light_positions=positions,
         light_angles_deg=np.rad2deg(np.column_stack(plan.setup.sphere.angles(positions))),
         joint_names=plan.robot.joint_names,
+        exposures=capture_exposures(
+            plan.trajectory, spec.settle_s, spec.exposure_s, plan.robot.light_pose, plan.setup.sphere.center
+        ),
     )
     names = [spec.image_pattern.format(index=i) for i in range(len(captures))]
     for name, capture in zip(names, captures, strict=True):

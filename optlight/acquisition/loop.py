@@ -51,7 +51,7 @@ def execute(plan: Plan, camera: CaptureCamera) -> list[Capture]:
     """The simulated robot runs ``plan``'s trajectory; one capture per dwell at its trigger time, with
     the light where forward kinematics puts it (module docstring, step 2)."""
     trajectory = plan.trajectory
-    trigger = trajectory.landmark_intervals[:, 0] + plan.problem.trajectory.settle_s
+    trigger = trajectory.trigger_times(plan.problem.trajectory.settle_s)
     joints = trajectory.sample(trigger)[0]
     return [camera.capture(plan.robot.light_pose(q)[0], k) for k, q in enumerate(joints)]
 
