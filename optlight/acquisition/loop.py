@@ -3,6 +3,7 @@ until a round no longer improves (the package docstring gives the steps)."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -55,8 +56,17 @@ def execute(plan: Plan, camera: CaptureCamera, robot: Robot | None = None) -> li
     robot with the lamp's estimated frame, while the camera's world places the real lamp relative to
     the nominal one."""
     nominal = plan.robot if robot is None else robot
-    poses = [nominal.light_pose(q) for q in trigger_joints(plan)]
-    return [camera.capture(position, k, rotation) for k, (position, rotation) in enumerate(poses)]
+    captures = []
+    for k, q in enumerate(trigger_joints(plan)):
+        position, rotation = nominal.light_pose(q)
+        if camera.kind == "folder":
+            # its image is the row of the light position the plan wrote into captures.csv (the plan's
+            # light frame); the capture keeps the nominal frame's pose, as the simulated ones do
+            found = camera.capture(plan.robot.light_pose(q)[0], k, rotation)
+            captures.append(dataclasses.replace(found, light_position=position))
+        else:
+            captures.append(camera.capture(position, k, rotation))
+    return captures
 
 
 def trigger_joints(plan: Plan) -> Array:
