@@ -23,6 +23,7 @@ from optlight.capture import ModelCamera, real_lamp, write_capture_png
 from optlight.capture.calibration import calibrate, lamp_robot
 from optlight.capture.lamp import LampGeometry, lamp_shading
 from optlight.capture.mitsuba import MitsubaCamera
+from optlight.errors import ProblemError
 from optlight.jsondata import json_safe
 from optlight.robot import load_robot
 from optlight.robot.loading import placement
@@ -229,3 +230,10 @@ def test_folder_camera_rounds_with_a_lamp_off_on_the_flange(tmp_path: Path, caps
     assert rounds == 2
     lamp = json.loads((out / "calibration.json").read_text())["lamp"]
     assert lamp["applied_offset_m"] == pytest.approx([0.03, 0.0, 0.0], abs=5e-3)
+
+
+def test_a_lamp_offset_beyond_the_light_sphere_is_refused() -> None:
+    with pytest.raises(ProblemError, match=r"world\.lamp_offset_m: expected an offset shorter than the light sphere's radius"):
+        problem_from_dict({"world": {"lamp_offset_m": [0.0, 0.0, 0.5]}})
+    with pytest.raises(ProblemError, match=r"loop\.lamp"):
+        problem_from_dict({"loop": {"lamp": "guess"}})
