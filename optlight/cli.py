@@ -245,6 +245,8 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"calibrated model: {calibration.light_model} light, power {calibration.power:.3g}, ambient "
             f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
         )
+        if calibration.lamp is not None:
+            console.print(escape(calibration.lamp.summary()))
     if acquisition.iterations:
         best = acquisition.best
         console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup

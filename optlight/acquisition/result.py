@@ -289,7 +289,8 @@ class Acquisition:
                 sub = Path("iterations") / f"{it.index:02d}"
                 files += [str(sub / f) for f in write_captures_folder(root / sub, it.plan, it.captures)]
         if self.iterations:
-            files += write_captures_folder(root, self.best.plan, self.best.captures)
+            lamp = None if self.calibration is None else self.calibration.lamp
+            files += write_captures_folder(root, self.best.plan, self.best.captures, lamp)
         if self.calibration is not None:
             files += write_calibration(root, self.setup.scene, self.calibration)
         if self.iterations:

@@ -201,6 +201,14 @@ def _check_world(p: Problem, file: str) -> None:
             "the real light anywhere, even behind the object)",
             list(p.world.light_offset_m),
         )
+    lamp = float(np.linalg.norm(p.world.lamp_offset_m))
+    if lamp >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "world.lamp_offset_m",
+            f"an offset shorter than the light sphere's radius ({lamp:.3g} m ≥ {ls.radius_m:g} m)",
+            list(p.world.lamp_offset_m),
+        )
     if p.world.noise_std > light.saturation:
         raise ProblemError(
             file,
