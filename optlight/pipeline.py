@@ -71,6 +71,7 @@ from optlight.planning.timing import time_parameterize
 from optlight.planning.torque_scaling import within_torque_limits
 from optlight.planning.trajectory import (
     TrajectoryNLPResult,
+    clear_between_knots,
     follow_planned_path,
     knot_cost,
     knots_on_arcs,
@@ -162,6 +163,8 @@ def solve(
                 path, warm, nlp = optimize_path(
                     setup, path, warm, failures, landmark_thetas, lambda d, t: notify("nlp", d, t)
                 )
+                clear = clear_between_knots(setup, path, warm, nlp, knots_on_path)
+                path, warm, nlp = clear.path, clear.warm, clear.nlp
                 break
             except CaptureSolverError as error:
                 if not setup.landmark_spec.allow_partial or len(visited) < 2:
@@ -190,7 +193,7 @@ def solve(
         )
 
     with stage("timing"):
-        timed_path, timed_knots = knots_on_path(setup, path, nlp.theta)
+        timed_path, timed_knots = clear.timed_path, clear.timed_knots
         trajectory = time_knots(setup, timed_path, timed_knots)
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory

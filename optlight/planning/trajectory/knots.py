@@ -23,10 +23,20 @@ FIRST_TRY_ITER = 120
 
 
 def optimize_knots(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool = False, *, fallback: bool = False
+    setup: Setup,
+    path: LightPath,
+    warm: Array,
+    fixed_start: bool = False,
+    *,
+    fallback: bool = False,
+    fixed_end: bool = False,
+    max_step: float | None = None,
 ) -> TrajectoryNLPResult:
     """The trajectory NLP over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
-    the first knot kept at its ``warm`` angles with ``fixed_start``; ``fallback``: the caller has
+    the first knot kept at its ``warm`` angles with ``fixed_start``, the last with ``fixed_end``,
+    each joint's step between two knots at most ``max_step`` (rad; None: ``[trajectory]
+    max_step_rad``) (the last two: a segment solved again between two postures the plan keeps,
+    :func:`~optlight.planning.trajectory.clear_between_knots`); ``fallback``: the caller has
     another way to go when this one fails (:func:`~optlight.pipeline.optimize_window`'s transfers,
     for a warm start with segments the per-knot IK did not follow).
 
@@ -82,9 +92,15 @@ def optimize_knots(
     """
     can_retry = not fallback and _warm_start_on_sphere(setup, path, warm)
     first_budget = FIRST_TRY_ITER if can_retry or fallback else None
-    first = _active_rounds(setup, path, warm, fixed_start, retry=False, max_iter=first_budget)
+    first = _active_rounds(
+        setup, path, warm, fixed_start, retry=False, max_iter=first_budget, fixed_end=fixed_end, max_step=max_step
+    )
     retry = not first.success and can_retry
-    nlp = _active_rounds(setup, path, warm, fixed_start, retry=True) if retry else first
+    nlp = (
+        _active_rounds(setup, path, warm, fixed_start, retry=True, fixed_end=fixed_end, max_step=max_step)
+        if retry
+        else first
+    )
     iterations = first.iterations + (0 if nlp is first else nlp.iterations)
     time_s = first.time_s + (0.0 if nlp is first else nlp.time_s)
     nlp = dataclasses.replace(nlp, iterations=iterations, time_s=time_s)
@@ -114,11 +130,19 @@ def _warm_start_on_sphere(setup: Setup, path: LightPath, warm: Array) -> bool:
 
 
 def _active_rounds(
-    setup: Setup, path: LightPath, warm: Array, fixed_start: bool, retry: bool, max_iter: int | None = None
+    setup: Setup,
+    path: LightPath,
+    warm: Array,
+    fixed_start: bool,
+    retry: bool,
+    max_iter: int | None = None,
+    fixed_end: bool = False,
+    max_step: float | None = None,
 ) -> TrajectoryNLPResult:
     """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
     from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not and at most
-    ``max_iter`` iterations each (None: ``[solver] max_iter``); the last solve, with the iterations
+    ``max_iter`` iterations each (None: ``[solver] max_iter``), the last knot kept with ``fixed_end``, joint steps at most ``max_step`` (None: ``[trajectory]
+    max_step_rad``); the last solve, with the iterations
     and time of all."""
     env = setup.environment
     solves: list[TrajectoryNLPResult] = []
@@ -128,7 +152,7 @@ def _active_rounds(
         optimizer = TrajectoryOptimizer(
             setup.robot,
             path_mode=setup.trajectory_spec.path,
-            max_step=setup.trajectory_spec.max_step_rad,
+            max_step=setup.trajectory_spec.max_step_rad if max_step is None else max_step,
             joint_weights=1.0 / setup.limits.velocity**2,
             clearance=env.clearance_function(setup.robot, rows) if env and env.collisions else None,
             active=None if active is None else active[:, rows],
@@ -138,7 +162,7 @@ def _active_rounds(
             retry=retry,
             max_iter=max_iter,
         )
-        solves.append(optimizer.solve(path, setup.sphere, start, fixed_start))
+        solves.append(optimizer.solve(path, setup.sphere, start, fixed_start, fixed_end))
         return solves[-1], solves[-1].theta if solves[-1].success else None
 
     nlp = solve_active_rows(setup, warm, solve)

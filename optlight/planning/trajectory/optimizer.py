@@ -260,10 +260,16 @@ class TrajectoryOptimizer:
         return np.concatenate(lbg), np.concatenate(ubg)
 
     def solve(
-        self, path: LightPath, sphere: LightSphere, theta0: Array, fixed_start: bool = False
+        self,
+        path: LightPath,
+        sphere: LightSphere,
+        theta0: Array,
+        fixed_start: bool = False,
+        fixed_end: bool = False,
     ) -> TrajectoryNLPResult:
         """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n); with
-        ``fixed_start``, the first knot keeps its angles from ``theta0``."""
+        ``fixed_start``, the first knot keeps its angles from ``theta0``; with ``fixed_end``, the
+        last (its bounds lower = upper = ``theta0[-1]``: the rest of the plan goes on from there)."""
         n_knots, n = path.n_knots, self.robot.n
         if n_knots < 2 and fixed_start:
             raise ValueError("a path of one knot with that knot fixed has nothing to optimise")
@@ -288,6 +294,8 @@ class TrajectoryOptimizer:
         lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), int(fixed_start))
         lower, upper = knot_bounds(self.robot)
         lbx, ubx = np.tile(lower, len(free)), np.tile(upper, len(free))
+        if fixed_end:
+            lbx[-n:] = ubx[-n:] = np.asarray(theta0, float)[-1]
         x0 = np.clip(theta0[free].ravel(), lbx, ubx)
         start = time.perf_counter()
         out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)

@@ -1,0 +1,256 @@
+"""Clearance between the knots (docs/design.md §6, §8): the trajectory NLP's clearance rows hold at
+its knots, the timing then moves the arm between them and the verification checks it densely. Where
+the exact check (coal, the verification's model) finds the arm too close between two knots, a knot
+is added there and the segment is solved again between its two captures (:func:`clear_between_knots`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from optlight.environment.check import EnvironmentReport, PairClearance
+from optlight.errors import CaptureSolverError, SolverError
+from optlight.planning.path import LightPath
+from optlight.planning.trajectory.knots import optimize_knots
+from optlight.planning.trajectory.optimizer import Array, TrajectoryNLPResult, knot_cost
+from optlight.planning.trajectory.transfer import plan_transfer
+from optlight.setup import Setup
+
+#: Configurations per knot interval at which the exact check looks between two knots (the straight
+#: line in joint space; the timed spline through knots this close stays within a fraction of a mm of it).
+BETWEEN_SAMPLES = 8
+#: Rounds of knot insertion and segment re-solves (each halves the intervals still too close).
+BETWEEN_ROUNDS = 4
+#: A segment solved again takes joint steps of at most this many times its knots' mean step (the
+#: largest joint's): the NLP cannot leap over an obstacle between two clear knots, as the steps halve
+#: with each round of added knots.
+STEP_SHRINK = 3.0
+#: An interval is too close when an exact distance on it is below its threshold plus this (m): the
+#: timed spline is not exactly the straight line the check samples.
+BETWEEN_PADDING_M = 1e-3
+
+#: The knots the timing follows: the path and its knots with knots added on the arcs
+#: (:func:`optlight.pipeline.knots_on_path`).
+TimedKnots = Callable[[Setup, LightPath, Array], tuple[LightPath, Array]]
+
+
+@dataclasses.dataclass(frozen=True)
+class ClearPath:
+    """The trajectory NLP's path ``path``, warm start ``warm`` (K, n) and result ``nlp`` with knots
+    added where the arm came too close between two knots, and what the timing follows: ``timed_path``
+    and its knots ``timed_knots`` (K', n), rad."""
+
+    path: LightPath
+    warm: Array
+    nlp: TrajectoryNLPResult
+    timed_path: LightPath
+    timed_knots: Array
+
+
+def clear_between_knots(
+    setup: Setup, path: LightPath, warm: Array, nlp: TrajectoryNLPResult, timed: TimedKnots
+) -> ClearPath:
+    """The plan's knots with the environment's clearance held between them, not only at them.
+
+    Per round: the knots the timing follows (``timed``) are checked with the exact distances of the
+    verification (:meth:`Environment.check`, coal) at :data:`BETWEEN_SAMPLES` configurations per
+    interval on the straight line in joint space between two knots; an interval with a distance below
+    its threshold (margin, self margin; the view cone with ``[view] mode = "path"``) plus
+    :data:`BETWEEN_PADDING_M` gets a knot at its middle, and each segment with such a knot is solved
+    again by the trajectory NLP from those knots, its two captures' postures kept
+    (``optimize_knots(fixed_start=True, fixed_end=True)``): the new knot carries the clearance rows,
+    the rest of the plan is unchanged. At most :data:`BETWEEN_ROUNDS` rounds. Without obstacles, or
+    when every interval clears, the path is returned as it is.
+
+    Raises :class:`CaptureSolverError` naming the segment's captures, the link and the obstacle when
+    the segment's NLP fails or the rounds run out."""
+    environment, theta, results = setup.environment, nlp.theta, [nlp]
+    for round_ in range(BETWEEN_ROUNDS + 1):
+        timed_path, timed_knots = timed(setup, path, theta)
+        if environment is None or not (environment.collisions or environment.view_mode == "path"):
+            return ClearPath(path, warm, nlp, timed_path, timed_knots)
+        broken, worst = _too_close(setup, timed_knots)
+        if not broken.any():
+            joined = nlp if len(results) == 1 else _joined(setup, results, theta)
+            return ClearPath(path, warm, joined, timed_path, timed_knots)
+        segments = np.unique(_segment_of(timed_path)[broken])
+        if round_ == BETWEEN_ROUNDS:
+            s = int(segments[0])
+            raise CaptureSolverError(
+                _message(s, worst, f"after {BETWEEN_ROUNDS} rounds of added knots"), s, s + 1
+            )
+        warm = _with_new_knots(timed_knots, theta, warm)
+        within = np.isin(_segment_of(timed_path), segments)  # every interval of those segments
+        path, theta, warm = _split(setup, timed_path, timed_knots, warm, within)
+        for s in segments:
+            knots = path.knots_between(int(s), int(s) + 1)
+            step = min(
+                STEP_SHRINK * float(np.abs(np.diff(theta[knots], axis=0)).max(axis=1).mean()),
+                setup.trajectory_spec.max_step_rad,
+            )
+            try:
+                result = optimize_knots(
+                    setup, path.window(int(s), int(s) + 1), theta[knots], True, fixed_end=True, max_step=step
+                )
+            except SolverError as error:
+                transfer = _transfer(setup, theta[knots])
+                if transfer is not None:
+                    path, theta, warm = _replaced(setup, path, theta, warm, int(s), transfer)
+                    continue
+                raise CaptureSolverError(
+                    _message(int(s), worst, f"and the trajectory NLP found no way around ({error})"),
+                    int(s),
+                    int(s) + 1,
+                ) from error
+            theta = theta.copy()
+            theta[knots] = result.theta
+            results.append(result)
+    raise AssertionError("unreachable")  # the last round returns or raises
+
+
+def _transfer(setup: Setup, knots: Array) -> Array | None:
+    """The transfer (:func:`plan_transfer`) between the first and last of ``knots`` (K, n), the
+    light off the sphere, with the way along ``knots`` as its detour; None when there is none."""
+    try:
+        return plan_transfer(setup, knots[0], knots[-1], detour=knots)
+    except SolverError:
+        return None
+
+
+def _replaced(
+    setup: Setup, path: LightPath, theta: Array, warm: Array, segment: int, knots: Array
+) -> tuple[LightPath, Array, Array]:
+    """``path``, its knots ``theta`` and warm start ``warm`` (K, n) with the knots of ``segment``
+    replaced by the transfer ``knots`` (K', n; the same end points): the light leaves the sphere
+    there (:attr:`LightPath.transfers`), the knots' directions, positions and rotations their lights'."""
+    part = path.knots_between(segment, segment + 1)
+    poses = [setup.robot.light_pose(q) for q in knots[1:-1]]
+    positions = np.array([a for a, _ in poses]).reshape(-1, 3)
+    offsets = positions - setup.sphere.center
+    directions = offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
+    rotations = np.array([r for _, r in poses]).reshape(-1, 3, 3)
+
+    def spliced(values: Array, inner: Array) -> Array:
+        return np.concatenate([values[: part.start + 1], inner, values[part.stop - 1 :]])
+
+    landmark_knots = path.landmark_knots.copy()
+    landmark_knots[segment + 1 :] += len(knots) - (part.stop - part.start)
+    transfers = path.transfers.copy()
+    transfers[segment] = True
+    refined = dataclasses.replace(
+        path,
+        directions=spliced(path.directions, directions),
+        positions=spliced(path.positions, positions),
+        rotations=spliced(path.rotations, rotations),
+        landmark_knots=landmark_knots,
+        transfers=transfers,
+    )
+    return refined, spliced(theta, knots[1:-1]), spliced(warm, knots[1:-1])
+
+
+def _too_close(setup: Setup, knots: Array) -> tuple[NDArray[np.bool_], PairClearance | None]:
+    """(K − 1,) the intervals between the ``knots`` (K, n) where an exact distance is below its
+    threshold plus :data:`BETWEEN_PADDING_M` (:func:`clear_between_knots`), and the worst such pair
+    (None when there is none). One check over all intervals first; only when it finds a pair too
+    close, one check per interval."""
+    if len(knots) < 2:
+        return np.zeros(0, bool), None
+    tau = np.arange(BETWEEN_SAMPLES + 1) / BETWEEN_SAMPLES
+    lines = knots[:-1, None, :] + tau[None, :, None] * np.diff(knots, axis=0)[:, None, :]
+    if _worst(_check(setup, lines.reshape(-1, knots.shape[1]))) is None:
+        return np.zeros(len(knots) - 1, bool), None
+    worst = [_worst(_check(setup, line)) for line in lines]
+    broken = np.array([w is not None for w in worst])
+    closest = min((w for w in worst if w is not None), key=lambda w: w.min_distance_m - w.threshold_m)
+    return broken, closest
+
+
+def _check(setup: Setup, thetas: Array) -> EnvironmentReport:
+    """The verification's exact environment check of the configurations ``thetas`` (T, n), no capture
+    among them."""
+    assert setup.environment is not None
+    return setup.environment.check(setup.robot, thetas, np.arange(len(thetas), dtype=float))
+
+
+def _worst(report: EnvironmentReport) -> PairClearance | None:
+    """The pair of ``report`` farthest below its threshold plus :data:`BETWEEN_PADDING_M`; None when
+    every pair keeps it."""
+    close = [
+        p
+        for p in report.pairs
+        if p.time_s is not None and p.min_distance_m < p.threshold_m + BETWEEN_PADDING_M
+    ]
+    return min(close, key=lambda p: p.min_distance_m - p.threshold_m) if close else None
+
+
+def _segment_of(path: LightPath) -> NDArray[np.int64]:
+    """(K − 1,) the segment (visiting order: segment s from capture s to s + 1) of each interval
+    between ``path``'s K knots."""
+    return np.searchsorted(path.landmark_knots, np.arange(path.n_knots - 1), side="right") - 1
+
+
+def _with_new_knots(timed_knots: Array, theta: Array, warm: Array) -> Array:
+    """The warm start (K', n) of the timed knots (K', n): ``warm`` (K, n) at the knots ``theta`` (K, n)
+    they hold (in order, the same angles), the timed knot itself at a knot added on an arc (found by
+    the generalized IK: a per-knot IK)."""
+    out, k = timed_knots.copy(), 0
+    for i, q in enumerate(timed_knots):
+        if k < len(theta) and np.array_equal(q, theta[k]):
+            out[i], k = warm[k], k + 1
+    return out
+
+
+def _split(
+    setup: Setup, path: LightPath, theta: Array, warm: Array, broken: NDArray[np.bool_]
+) -> tuple[LightPath, Array, Array]:
+    """``path``, its knots ``theta`` and warm start ``warm`` (K, n) with a knot at the middle (in joint
+    space) of each interval in ``broken`` (K − 1,): its light's direction, position and rotation (the
+    NLP pins only the captures' lights), its warm start the middle itself."""
+    at = np.flatnonzero(broken) + 1
+    middles = 0.5 * (theta[at - 1] + theta[at])
+    poses = [setup.robot.light_pose(q) for q in middles]
+    positions = np.array([a for a, _ in poses])
+    offsets = positions - setup.sphere.center
+    directions = offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
+    rotations = np.array([r for _, r in poses])
+    shift = np.searchsorted(at, path.landmark_knots, side="right")  # new knots before each capture
+    refined = dataclasses.replace(
+        path,
+        directions=np.insert(path.directions, at, directions, axis=0),
+        positions=np.insert(path.positions, at, positions, axis=0),
+        rotations=np.insert(path.rotations, at, rotations, axis=0),
+        landmark_knots=(path.landmark_knots + shift).astype(np.int64),
+    )
+    return refined, np.insert(theta, at, middles, axis=0), np.insert(warm, at, middles, axis=0)
+
+
+def _joined(setup: Setup, results: list[TrajectoryNLPResult], theta: Array) -> TrajectoryNLPResult:
+    """One result for the first solve and the segments' re-solves ``results`` at the knots ``theta``
+    (K, n): iterations and times added, the largest |h|, the statuses that occurred."""
+    return TrajectoryNLPResult(
+        theta=theta,
+        success=all(r.success for r in results),
+        status=", ".join(dict.fromkeys(r.status for r in results)),
+        cost=knot_cost(setup, theta),
+        max_h_residual=max(r.max_h_residual for r in results),
+        iterations=sum(r.iterations for r in results),
+        time_s=sum(r.time_s for r in results),
+    )
+
+
+def _message(segment: int, worst: PairClearance | None, why: str) -> str:
+    """The one line of a segment whose clearance between knots could not be made to hold."""
+    where = (
+        f"{worst.first} comes {worst.min_distance_m * 1e3:.1f} mm from {worst.second} "
+        f"(allowed {worst.threshold_m * 1e3:.1f} mm) between knots"
+        if worst is not None
+        else "the arm comes too close between knots"
+    )
+    return (
+        f"between captures {segment} and {segment + 1} (visiting order): {where} {why}; move the "
+        "obstacle, lower [environment] margin_m or choose other captures"
+    )
