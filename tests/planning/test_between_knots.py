@@ -1,0 +1,94 @@
+"""Clearance between the trajectory's knots (docs/design.md §6, §8): an obstacle that the straight
+motion between two clear knots passes through is found by the exact check (coal) and planned around."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import optlight
+from optlight.pipeline import knots_on_path
+from optlight.planning.path import LightPath
+from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
+from optlight.setup import Setup
+from optlight.spec import Problem, problem_from_dict
+
+#: Configurations per knot interval of the test's own dense check (the planner's uses 8).
+DENSE = 50
+
+
+def _with_post(problem: Problem, center: np.ndarray) -> Problem:
+    """``problem`` with the environment on and a 3 cm box ("post") at ``center`` (m)."""
+    data = problem.to_dict()
+    data["environment"] = {
+        **data.get("environment", {}),
+        "enabled": True,
+        "boxes": [{"name": "post", "center_m": [float(x) for x in center], "size_m": [0.03, 0.03, 0.03]}],
+    }
+    return problem_from_dict(data, source=problem.source)
+
+
+def _frame_position(robot: object, theta: np.ndarray, frame: str) -> np.ndarray:
+    model, data = robot.model, robot.data  # type: ignore[attr-defined]
+    pin.forwardKinematics(model, data, robot.to_pin(theta))  # type: ignore[attr-defined]
+    pin.updateFramePlacements(model, data)
+    return data.oMf[model.getFrameId(frame)].translation.copy()
+
+
+def _dense(knots: np.ndarray) -> np.ndarray:
+    tau = np.arange(DENSE + 1) / DENSE
+    return (knots[:-1, None, :] + tau[None, :, None] * np.diff(knots, axis=0)[:, None, :]).reshape(
+        -1, knots.shape[1]
+    )
+
+
+def _two_capture_path(setup: Setup, thetas: np.ndarray) -> LightPath:
+    """A path of two captures and no knot between them, at the postures ``thetas`` (2, n)."""
+    poses = [setup.robot.light_pose(q) for q in thetas]
+    positions = np.array([a for a, _ in poses])
+    offsets = positions - setup.sphere.center
+    return LightPath(
+        offsets / np.linalg.norm(offsets, axis=1, keepdims=True),
+        positions,
+        np.array([r for _, r in poses]),
+        np.array([0, 1]),
+        np.array([0, 1]),
+        np.array([False]),
+    )
+
+
+@pytest.mark.slow
+def test_an_obstacle_between_two_clear_knots_is_planned_around_and_coal_finds_the_motion_clear(
+    small_default: Problem,
+) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        plan = optlight.solve(small_default)
+    robot, q = plan.setup.robot, plan.landmark_thetas
+    # a post where panda_link5 is halfway between two captures: clear of both, in the way between them
+    for i in range(len(q) - 1):
+        post = _frame_position(robot, 0.5 * (q[i] + q[i + 1]), "panda_link5")
+        setup = Setup.from_problem(_with_post(small_default, post))
+        env = setup.environment
+        assert env is not None
+        ends = q[i : i + 2]
+        if env.check(robot, ends, [0.0, 1.0]).passed:
+            break
+    else:
+        pytest.fail("no two captures of the small default plan are clear of a post between them")
+    before = _dense(ends)
+    report = env.check(robot, before, np.arange(len(before), dtype=float))
+    assert not report.passed  # the motion the old planner timed: straight through the post
+    assert any(v.second == "post" for v in report.violations)
+
+    path = _two_capture_path(setup, ends)
+    nlp = TrajectoryNLPResult(ends, True, "given", 0.0, 0.0, 0, 0.0)
+    clear = clear_between_knots(setup, path, ends, nlp, knots_on_path)
+    knots = clear.timed_knots
+    np.testing.assert_array_equal(knots[[0, -1]], ends)  # the captures' postures are kept
+    after = _dense(knots)
+    assert env.check(robot, after, np.arange(len(after), dtype=float)).passed
+    assert clear.path.n_knots == len(clear.nlp.theta) == len(clear.warm)
