@@ -10,6 +10,7 @@ import pinocchio as pin
 import pytest
 
 import optlight
+from optlight.errors import CaptureSolverError
 from optlight.pipeline import knots_on_path
 from optlight.planning.path import LightPath
 from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
@@ -60,14 +61,19 @@ def _two_capture_path(setup: Setup, thetas: np.ndarray) -> LightPath:
     )
 
 
-@pytest.mark.slow
-def test_an_obstacle_between_two_clear_knots_is_planned_around_and_coal_finds_the_motion_clear(
-    small_default: Problem,
-) -> None:
+@pytest.fixture(scope="module")
+def default_plan(small_default: Problem) -> optlight.Plan:
+    """The small default problem's plan (no environment): its capture postures."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        plan = optlight.solve(small_default)
-    robot, q = plan.setup.robot, plan.landmark_thetas
+        return optlight.solve(small_default)
+
+
+@pytest.mark.slow
+def test_an_obstacle_between_two_clear_knots_is_planned_around_and_coal_finds_the_motion_clear(
+    small_default: Problem, default_plan: optlight.Plan
+) -> None:
+    robot, q = default_plan.setup.robot, default_plan.landmark_thetas
     # a post where panda_link5 is halfway between two captures: clear of both, in the way between them
     for i in range(len(q) - 1):
         post = _frame_position(robot, 0.5 * (q[i] + q[i + 1]), "panda_link5")
@@ -92,3 +98,23 @@ def test_an_obstacle_between_two_clear_knots_is_planned_around_and_coal_finds_th
     after = _dense(knots)
     assert env.check(robot, after, np.arange(len(after), dtype=float)).passed
     assert clear.path.n_knots == len(clear.nlp.theta) == len(clear.warm)
+
+
+@pytest.mark.slow
+def test_an_obstacle_at_a_capture_is_refused_naming_the_captures_the_link_and_the_obstacle(
+    small_default: Problem, default_plan: optlight.Plan
+) -> None:
+    robot, q = default_plan.setup.robot, default_plan.landmark_thetas
+    ends = q[:2]
+    setup = Setup.from_problem(_with_post(small_default, _frame_position(robot, ends[1], "panda_link5")))
+    assert setup.environment is not None
+    assert not setup.environment.check(
+        robot, ends, [0.0, 1.0]
+    ).passed  # no way around it: it is at the capture
+    nlp = TrajectoryNLPResult(ends, True, "given", 0.0, 0.0, 0, 0.0)
+    with pytest.raises(CaptureSolverError) as refused:
+        clear_between_knots(setup, _two_capture_path(setup, ends), ends, nlp, knots_on_path)
+    message = str(refused.value)
+    assert (refused.value.first, refused.value.last) == (0, 1)
+    assert message.startswith("between captures 0 and 1 (visiting order): ")
+    assert "post" in message and "panda_link" in message and "\n" not in message
