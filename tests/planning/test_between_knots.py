@@ -11,8 +11,9 @@ import pytest
 
 import optlight
 from optlight.errors import CaptureSolverError
-from optlight.pipeline import knots_on_path
+from optlight.pipeline import capture_path, knots_on_path, optimize_path, time_knots, verify_knots
 from optlight.planning.path import LightPath
+from optlight.planning.policy import knot_ik
 from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
 from optlight.setup import Setup
 from optlight.spec import Problem, problem_from_dict
@@ -118,3 +119,62 @@ def test_an_obstacle_at_a_capture_is_refused_naming_the_captures_the_link_and_th
     assert (refused.value.first, refused.value.last) == (0, 1)
     assert message.startswith("between captures 0 and 1 (visiting order): ")
     assert "post" in message and "panda_link" in message and "\n" not in message
+
+
+def _with_plate(problem: Problem, center: np.ndarray, normal: np.ndarray) -> Problem:
+    """``problem`` with the environment on, the path free, joint steps up to 1.5 rad between knots
+    (sparse knots), and a 4 mm plate, 12 cm square, at ``center`` (m) across ``normal``."""
+    data = problem.to_dict()
+    yaw = np.degrees(np.arctan2(normal[1], normal[0]))
+    pitch = -np.degrees(np.arcsin(normal[2] / np.linalg.norm(normal)))
+    plate = {
+        "name": "plate",
+        "center_m": [float(x) for x in center],
+        "size_m": [0.004, 0.12, 0.12],
+        "rpy_deg": [0.0, float(pitch), float(yaw)],
+    }
+    data["environment"] = {**data.get("environment", {}), "enabled": True, "boxes": [plate]}
+    data["trajectory"] = {**data.get("trajectory", {}), "path": "free", "max_step_rad": 1.5}
+    return problem_from_dict(data, source=problem.source)
+
+
+@pytest.mark.slow
+def test_knots_on_either_side_of_a_thin_plate_are_refined_and_the_timed_motion_verifies(
+    small_default: Problem, default_plan: optlight.Plan
+) -> None:
+    """A plate across the path panda_link5 takes between two captures, thinner than a knot step: the
+    trajectory NLP puts its knots on either side (clear at each), the straight motion between them
+    passes through it; after :func:`clear_between_knots` the timed motion passes the pipeline's own
+    verification (exact coal distances at ≥ 1 kHz)."""
+    robot, q = default_plan.setup.robot, default_plan.landmark_thetas
+    positions = np.array([lm.position for lm in default_plan.visited])
+    for i in range(len(q) - 1):
+        ends, middle, step = q[i : i + 2], 0.5 * (q[i] + q[i + 1]), 0.01 * (q[i + 1] - q[i])
+        center = _frame_position(robot, middle, "panda_link5")
+        normal = _frame_position(robot, middle + step, "panda_link5") - _frame_position(
+            robot, middle - step, "panda_link5"
+        )
+        setup = Setup.from_problem(_with_plate(small_default, center, normal))
+        assert setup.environment is not None
+        if not setup.environment.check(robot, ends, [0.0, 1.0]).passed:
+            continue
+        path = capture_path(setup, positions[i : i + 2], ends)
+        warm, failures = knot_ik(setup, path, ends)
+        path, warm, nlp = optimize_path(setup, path, warm, failures, ends)
+        old_path, old_knots = knots_on_path(setup, path, nlp.theta)  # what the timing followed
+        old = verify_knots(
+            setup, time_knots(setup, old_path, old_knots), positions[i : i + 2], old_knots, old_path.transfers
+        )
+        if not old.passed:
+            break
+    else:
+        pytest.fail("no two captures of the small default plan have their knots on either side of a plate")
+    assert "plate" in old.summary()  # the plan failed its own verification at the plate
+
+    clear = clear_between_knots(setup, path, warm, nlp, knots_on_path)
+    trajectory = time_knots(setup, clear.timed_path, clear.timed_knots)
+    report = verify_knots(
+        setup, trajectory, positions[i : i + 2], clear.timed_knots, clear.timed_path.transfers
+    )
+    assert report.passed, report.summary()
+    np.testing.assert_array_equal(clear.timed_knots[[0, -1]], nlp.theta[[0, -1]])  # the captures kept

@@ -17,7 +17,6 @@ from optlight.errors import CaptureSolverError, SolverError
 from optlight.planning.path import LightPath
 from optlight.planning.trajectory.knots import optimize_knots
 from optlight.planning.trajectory.optimizer import Array, TrajectoryNLPResult, knot_cost
-from optlight.planning.trajectory.transfer import plan_transfer
 from optlight.setup import Setup
 
 #: Configurations per knot interval at which the exact check looks between two knots (the straight
@@ -58,15 +57,24 @@ def clear_between_knots(
 ) -> ClearPath:
     """The plan's knots with the environment's clearance held between them, not only at them.
 
-    Per round: the knots the timing follows (``timed``) are checked with the exact distances of the
-    verification (:meth:`Environment.check`, coal) at :data:`BETWEEN_SAMPLES` configurations per
-    interval on the straight line in joint space between two knots; an interval with a distance below
-    its threshold (margin, self margin; the view cone with ``[view] mode = "path"``) plus
-    :data:`BETWEEN_PADDING_M` gets a knot at its middle, and each segment with such a knot is solved
+    Per round: the knots the timing follows (``timed``: the NLP's and those added on the arcs) are
+    checked with the exact distances of the verification (:meth:`Environment.check`, coal) at
+    :data:`BETWEEN_SAMPLES` configurations per interval on the straight line in joint space between
+    two knots (:func:`_too_close`: below the threshold, margin or self margin, and the view cone with
+    ``[view] mode = "path"``; or within :data:`BETWEEN_PADDING_M` of it and closer than at the knots).
+    Each segment with such an interval has every interval halved (a knot at its middle) and is solved
     again by the trajectory NLP from those knots, its two captures' postures kept
-    (``optimize_knots(fixed_start=True, fixed_end=True)``): the new knot carries the clearance rows,
-    the rest of the plan is unchanged. At most :data:`BETWEEN_ROUNDS` rounds. Without obstacles, or
-    when every interval clears, the path is returned as it is.
+    (``optimize_knots(fixed_start=True, fixed_end=True)``), each joint's step at most
+    :data:`STEP_SHRINK` times the segment's mean step: the new knots carry the clearance rows, the
+    step bound keeps the NLP from leaping over the obstacle again between two of them, and the rest
+    of the plan is unchanged. When that NLP fails on the sphere, the segment becomes a transfer (the
+    light leaves the sphere outwards, :attr:`LightPath.transfers`) solved the same way. At most
+    :data:`BETWEEN_ROUNDS` rounds. Without obstacles, or when every interval clears, the path is
+    returned as it is.
+
+    Why not halve only the intervals too close: the NLP's knots are free to slide, and a knot added
+    in one interval let it leap over the obstacle in the next (a Kinova's link_5 past the camera body:
+    12 mm inside it after every round).
 
     Raises :class:`CaptureSolverError` naming the segment's captures, the link and the obstacle when
     the segment's NLP fails or the rounds run out."""
@@ -88,70 +96,42 @@ def clear_between_knots(
         warm = _with_new_knots(timed_knots, theta, warm)
         within = np.isin(_segment_of(timed_path), segments)  # every interval of those segments
         path, theta, warm = _split(setup, timed_path, timed_knots, warm, within)
-        for s in segments:
-            knots = path.knots_between(int(s), int(s) + 1)
+        for s in (int(s) for s in segments):
+            knots = path.knots_between(s, s + 1)
             step = min(
                 STEP_SHRINK * float(np.abs(np.diff(theta[knots], axis=0)).max(axis=1).mean()),
                 setup.trajectory_spec.max_step_rad,
             )
-            try:
-                result = optimize_knots(
-                    setup, path.window(int(s), int(s) + 1), theta[knots], True, fixed_end=True, max_step=step
-                )
-            except SolverError as error:
-                transfer = _transfer(setup, theta[knots])
-                if transfer is not None:
-                    path, theta, warm = _replaced(setup, path, theta, warm, int(s), transfer)
-                    continue
-                raise CaptureSolverError(
-                    _message(int(s), worst, f"and the trajectory NLP found no way around ({error})"),
-                    int(s),
-                    int(s) + 1,
-                ) from error
+            path, result = _solve_segment(setup, path, theta[knots], s, step, worst)
             theta = theta.copy()
             theta[knots] = result.theta
             results.append(result)
     raise AssertionError("unreachable")  # the last round returns or raises
 
 
-def _transfer(setup: Setup, knots: Array) -> Array | None:
-    """The transfer (:func:`plan_transfer`) between the first and last of ``knots`` (K, n), the
-    light off the sphere, with the way along ``knots`` as its detour; None when there is none."""
+def _solve_segment(
+    setup: Setup, path: LightPath, knots: Array, segment: int, step: float, worst: PairClearance | None
+) -> tuple[LightPath, TrajectoryNLPResult]:
+    """The trajectory NLP over ``segment`` of ``path`` from its ``knots`` (K, n), its two captures'
+    postures kept, joint steps at most ``step`` (rad): on the sphere (or off it, as the segment is);
+    when that fails on the sphere, as a transfer (the light leaves the sphere outwards between the
+    two captures, :attr:`LightPath.transfers`). The path (with that transfer) and the result; raises
+    :class:`CaptureSolverError` (:func:`_message`) when both fail."""
+    window = path.window(segment, segment + 1)
     try:
-        return plan_transfer(setup, knots[0], knots[-1], detour=knots)
-    except SolverError:
-        return None
-
-
-def _replaced(
-    setup: Setup, path: LightPath, theta: Array, warm: Array, segment: int, knots: Array
-) -> tuple[LightPath, Array, Array]:
-    """``path``, its knots ``theta`` and warm start ``warm`` (K, n) with the knots of ``segment``
-    replaced by the transfer ``knots`` (K', n; the same end points): the light leaves the sphere
-    there (:attr:`LightPath.transfers`), the knots' directions, positions and rotations their lights'."""
-    part = path.knots_between(segment, segment + 1)
-    poses = [setup.robot.light_pose(q) for q in knots[1:-1]]
-    positions = np.array([a for a, _ in poses]).reshape(-1, 3)
-    offsets = positions - setup.sphere.center
-    directions = offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
-    rotations = np.array([r for _, r in poses]).reshape(-1, 3, 3)
-
-    def spliced(values: Array, inner: Array) -> Array:
-        return np.concatenate([values[: part.start + 1], inner, values[part.stop - 1 :]])
-
-    landmark_knots = path.landmark_knots.copy()
-    landmark_knots[segment + 1 :] += len(knots) - (part.stop - part.start)
+        return path, optimize_knots(setup, window, knots, True, fixed_end=True, max_step=step)
+    except SolverError as error:
+        if window.transfers[0]:
+            raise CaptureSolverError(_message(segment, worst, error), segment, segment + 1) from error
     transfers = path.transfers.copy()
     transfers[segment] = True
-    refined = dataclasses.replace(
-        path,
-        directions=spliced(path.directions, directions),
-        positions=spliced(path.positions, positions),
-        rotations=spliced(path.rotations, rotations),
-        landmark_knots=landmark_knots,
-        transfers=transfers,
-    )
-    return refined, spliced(theta, knots[1:-1]), spliced(warm, knots[1:-1])
+    try:
+        window = window.with_transfers([True])
+        return path.with_transfers(transfers), optimize_knots(
+            setup, window, knots, True, fixed_end=True, max_step=step
+        )
+    except SolverError as error:
+        raise CaptureSolverError(_message(segment, worst, error), segment, segment + 1) from error
 
 
 def _too_close(setup: Setup, knots: Array) -> tuple[NDArray[np.bool_], PairClearance | None]:
@@ -260,15 +240,21 @@ def _joined(setup: Setup, results: list[TrajectoryNLPResult], theta: Array) -> T
     )
 
 
-def _message(segment: int, worst: PairClearance | None, why: str) -> str:
-    """The one line of a segment whose clearance between knots could not be made to hold."""
+def _message(segment: int, worst: PairClearance | None, why: SolverError | str) -> str:
+    """The one line of a segment whose clearance between knots could not be made to hold: after
+    :data:`BETWEEN_ROUNDS` rounds (``why`` a sentence) or with the NLP failing (``why`` its error)."""
     where = (
         f"{worst.first} comes {worst.min_distance_m * 1e3:.1f} mm from {worst.second} "
         f"(allowed {worst.threshold_m * 1e3:.1f} mm) between knots"
         if worst is not None
         else "the arm comes too close between knots"
     )
+    reason = (
+        why
+        if isinstance(why, str)
+        else f"and the trajectory NLP found no way around, on the sphere or off it ({why})"
+    )
     return (
-        f"between captures {segment} and {segment + 1} (visiting order): {where} {why}; move the "
+        f"between captures {segment} and {segment + 1} (visiting order): {where} {reason}; move the "
         "obstacle, lower [environment] margin_m or choose other captures"
     )
