@@ -21,8 +21,10 @@ the solve draws nothing and writes nothing):
    of about :data:`NLP_WINDOW_KNOTS` knots cut at captures (:func:`optimize_path`), with the view
    rows (``[view]``) and clearance rows (``[environment] enabled``); where it finds no way on the
    sphere, the segments whose arc the per-knot IK could not follow leave it
-   (:func:`optimize_window`); the transfers from the start configuration to the first capture and
-   back (``[trajectory] return_home``);
+   (:func:`optimize_window`); where the motion between two knots comes too close to an obstacle
+   (or itself), that segment is refined and solved again
+   (:func:`~optlight.planning.trajectory.clear_between_knots`); the transfers from the start
+   configuration to the first capture and back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: the controller waypoints chosen (:func:`~optlight.planning.waypoints.controller_waypoints`),
