@@ -1,7 +1,8 @@
 """Clearance between the knots (docs/design.md §6, §8): the trajectory NLP's clearance rows hold at
 its knots, the timing then moves the arm between them and the verification checks it densely. Where
-the exact check (coal, the verification's model) finds the arm too close between two knots, a knot
-is added there and the segment is solved again between its two captures (:func:`clear_between_knots`).
+the exact check (coal, the verification's model) finds the arm too close between two knots, the
+segment's knots are doubled and it is solved again between its two captures' postures
+(:func:`clear_between_knots`).
 """
 
 from __future__ import annotations
@@ -86,20 +87,22 @@ def clear_between_knots(
     Raises :class:`CaptureSolverError` naming the segment's captures, the link and the obstacle when
     the segment's NLP fails or the rounds run out."""
     environment, theta, results = setup.environment, nlp.theta, [nlp]
-    for round_ in range(BETWEEN_ROUNDS + 1):
-        timed_path, timed_knots = timed(setup, path, theta)
-        if environment is None or not (environment.collisions or environment.view_mode == "path"):
-            return ClearPath(path, warm, nlp, timed_path, timed_knots)
+    timed_path, timed_knots = timed(setup, path, theta)
+    if environment is None or not (environment.collisions or environment.view_mode == "path"):
+        return ClearPath(path, warm, nlp, timed_path, timed_knots)
+    rounds = 0
+    while True:
         broken, worst = _too_close(setup, timed_knots)
         if not broken.any():
             joined = nlp if len(results) == 1 else _joined(setup, results, theta)
             return ClearPath(path, warm, joined, timed_path, timed_knots)
         segments = np.unique(_segment_of(timed_path)[broken])
-        if round_ == BETWEEN_ROUNDS:
+        if rounds == BETWEEN_ROUNDS:
             s = int(segments[0])
             raise CaptureSolverError(
                 _message(s, worst, f"after {BETWEEN_ROUNDS} rounds of added knots"), s, s + 1
             )
+        rounds += 1
         warm = _with_new_knots(timed_knots, theta, warm)
         within = np.isin(_segment_of(timed_path), segments)  # every interval of those segments
         path, theta, warm = _split(setup, timed_path, timed_knots, warm, within)
@@ -113,7 +116,7 @@ def clear_between_knots(
             theta = theta.copy()
             theta[knots] = result.theta
             results.append(result)
-    raise AssertionError("unreachable")  # the last round returns or raises
+        timed_path, timed_knots = timed(setup, path, theta)
 
 
 def _solve_segment(
