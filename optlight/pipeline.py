@@ -23,8 +23,10 @@ the solve draws nothing and writes nothing):
    of about :data:`NLP_WINDOW_KNOTS` knots cut at captures (:func:`optimize_path`), with the view
    rows (``[view]``) and clearance rows (``[environment] enabled``); where it finds no way on the
    sphere, the segments whose arc the per-knot IK could not follow leave it
-   (:func:`optimize_window`); the transfers from the start configuration to the first capture and
-   back (``[trajectory] return_home``);
+   (:func:`optimize_window`); where the motion between two knots comes too close to an obstacle
+   (or itself), that segment is refined and solved again
+   (:func:`~optlight.planning.trajectory.clear_between_knots`); the transfers from the start
+   configuration to the first capture and back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: the controller waypoints chosen (:func:`~optlight.planning.waypoints.controller_waypoints`),
@@ -77,7 +79,9 @@ from optlight.planning.timing import time_parameterize
 from optlight.planning.torque_scaling import within_torque_limits
 from optlight.planning.trajectory import (
     TrajectoryNLPResult,
+    clear_between_knots,
     follow_planned_path,
+    joined_results,
     knot_cost,
     knots_on_arcs,
     optimize_knots,
@@ -182,6 +186,8 @@ def solve(
                     landmark_thetas,
                     lambda d, t: notify("nlp", d, t),
                 )
+                clear = clear_between_knots(cell, trajectory_spec, setup.solver, path, warm, nlp, knots_on_path)
+                path, warm, nlp = clear.path, clear.warm, clear.nlp
                 break
             except CaptureSolverError as error:
                 if not setup.landmark_spec.allow_partial or len(visited) < 2:
@@ -210,7 +216,7 @@ def solve(
         )
 
     with stage("timing"):
-        timed_path, timed_knots = knots_on_path(cell, path, nlp.theta)
+        timed_path, timed_knots = clear.timed_path, clear.timed_knots
         trajectory = time_knots(setup, timed_path, timed_knots)
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory
@@ -439,7 +445,7 @@ def optimize_path(
         results.append(result)
         if progress is not None:
             progress(done + 1, len(windows))
-    return path.with_transfers(transfers), warm, _joined(results, theta, knot_cost(cell, theta))
+    return path.with_transfers(transfers), warm, joined_results(results, theta, knot_cost(cell, theta))
 
 
 def optimize_window(
@@ -471,21 +477,6 @@ def optimize_window(
     path = path.with_transfers(unfollowed)
     warm, _ = knot_ik(cell, path, landmark_thetas)
     return path, warm, nlp(path, warm, fixed_start)
-
-
-def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -> TrajectoryNLPResult:
-    """One result for the windows' solves ``results`` (a window solved again with the one before it
-    counts twice) at the knots ``theta`` (K, n) of ``cost``: iterations and times added, the largest
-    |h|, the statuses that occurred."""
-    return TrajectoryNLPResult(
-        theta=theta,
-        success=all(r.success for r in results),
-        status=", ".join(dict.fromkeys(r.status for r in results)),
-        cost=cost,
-        max_h_residual=max(r.max_h_residual for r in results),
-        iterations=sum(r.iterations for r in results),
-        time_s=sum(r.time_s for r in results),
-    )
 
 
 def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
