@@ -98,7 +98,7 @@ def per_knot_ik_plan(problem: Problem) -> dict[str, float | bool]:
     order = (
         tour_order(placement.thetas)
         if design is not None
-        else visiting_order(setup.trajectory_spec, placement)
+        else visiting_order(setup.trajectory_spec, setup.limits, placement)
     )
     positions = np.array([placement.landmarks[i].position for i in order])
     path = capture_path(setup.sphere, setup.trajectory_spec, positions, placement.thetas[order])

@@ -29,12 +29,14 @@ import baselines  # noqa: E402
 
 import optlight  # noqa: E402
 from optlight.export import write_json  # noqa: E402
-from optlight.spec import load_problem  # noqa: E402
+from optlight.spec import load_problem, problem_from_dict  # noqa: E402
 
 #: The per-knot IK baseline in ``baselines.py``: ``per_knot_ik_plan(problem) -> dict``.
 BASELINE = "per_knot_ik_plan"
 #: Quantities of our plans only: the moving time's rest-to-rest lower bound and their ratio.
 PLAN_KEYS = ("duration_s", "rest_to_rest_s", "motion_bound_ratio", "nlp_iterations")
+#: ... and, with flying captures, the bound of a motion that does not stop and the ratio to it.
+FLYING_KEYS = ("flying_bound_s", "flying_bound_ratio")
 #: Quantities compared with the baseline: our name -> the baseline dict's key.
 BASELINE_KEYS = {
     "time_s": "time_s",
@@ -60,6 +62,7 @@ def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
         "duration_s": plan.trajectory.duration,
         "rest_to_rest_s": bound["rest_to_rest_s"],
         "motion_bound_ratio": bound["ratio"],
+        **({"flying_bound_s": bound["flying_s"], "flying_bound_ratio": bound["flying_ratio"]} if "flying_s" in bound else {}),
         "max_h_residual_m": plan.nlp.max_h_residual,
         "nlp_iterations": plan.nlp.iterations,
         "nlp_success": bool(plan.nlp.success),
@@ -71,14 +74,19 @@ def _solve_once(problem: optlight.Problem) -> dict[str, Any]:
     }
 
 
-def run(problem: str, repeats: int = 1) -> dict[str, Any]:
+def run(problem: str, repeats: int = 1, capture: str | None = None) -> dict[str, Any]:
     """``repeats`` solves of ``problem`` (name or path) and as many baseline plans; returns the
-    machine-readable results (per repeat under ``runs``, median/p98 under ``plan`` and ``baseline``)."""
+    machine-readable results (per repeat under ``runs``, median/p98 under ``plan`` and ``baseline``).
+    ``capture`` ("stop" or "flying") replaces the problem's ``[trajectory] capture``; the problem is
+    then named with it, e.g. ``default (flying)``."""
     spec = load_problem(problem)
+    label = spec.name
+    if capture is not None:
+        data = spec.to_dict()
+        data["trajectory"]["capture"] = capture
+        spec, label = problem_from_dict(data, source=spec.source), f"{spec.name} ({capture})"
     runs = [_solve_once(spec) for _ in range(repeats)]
-    plan: dict[str, Any] = {
-        key: _dist([r[key] for r in runs]) for key in (*BASELINE_KEYS, *PLAN_KEYS)
-    }
+    plan: dict[str, Any] = {key: _dist([r[key] for r in runs]) for key in _plan_keys(runs)}
     stages = list(dict.fromkeys(stage for r in runs for stage in r["stages_s"]))  # in pipeline order
     plan["stages_s"] = {s: _dist([r["stages_s"][s] for r in runs if s in r["stages_s"]]) for s in stages}
 
@@ -91,7 +99,7 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
     )
     return {
         "benchmark": "solve",
-        "problem": spec.name,
+        "problem": label,
         "robot": spec.robot.name,
         "captures": int(np.median([r["landmarks_visited"] for r in runs])),
         "repeats": repeats,
@@ -104,6 +112,11 @@ def run(problem: str, repeats: int = 1) -> dict[str, Any]:
     }
 
 
+def _plan_keys(runs: Sequence[dict[str, Any]]) -> tuple[str, ...]:
+    """The quantities every run has: the compared ones, ours, and the flying bound when flying."""
+    return (*BASELINE_KEYS, *PLAN_KEYS, *(k for k in FLYING_KEYS if all(k in r for r in runs)))
+
+
 def _print(result: dict[str, Any]) -> None:
     plan, baseline = result["plan"], result["baseline"]
     print(
@@ -111,7 +124,7 @@ def _print(result: dict[str, Any]) -> None:
         f"{result['repeats']} repeat(s), success {result['success_pct']:.0f} %"
     )
     print(f"{'quantity':24s} {'median':>12s} {'p98':>12s} {'baseline':>12s}")
-    for key in (*BASELINE_KEYS, *PLAN_KEYS):
+    for key in _plan_keys(result["runs"]):
         theirs = (
             f"{baseline[key]['median']:12.4g}" if baseline is not None and key in baseline else f"{'–':>12s}"
         )
@@ -127,8 +140,9 @@ def main() -> None:
     parser.add_argument("problem", nargs="?", default="default", help="built-in problem name or path")
     parser.add_argument("--repeats", type=int, default=1, help="solves (and baseline plans) per problem")
     parser.add_argument("--json", type=Path, help="write the results here as JSON")
+    parser.add_argument("--capture", choices=("stop", "flying"), help="replace the problem's [trajectory] capture")
     args = parser.parse_args()
-    result = run(args.problem, args.repeats)
+    result = run(args.problem, args.repeats, args.capture)
     _print(result)
     if args.json:
         write_json(args.json, result)

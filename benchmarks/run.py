@@ -70,6 +70,8 @@ RESULTS_DIR = BENCH_DIR / "results"
 README = BENCH_DIR / "README.md"
 #: Module of the whole-pipeline benchmark, ``run(problem, repeats)``; every other ``bench_*.py`` is a component.
 PIPELINE_MODULE = "bench_solve"
+#: Problems the pipeline benchmark also solves with flying captures (``solve-flying``).
+FLYING_PROBLEMS = ("default", "yale_grid")
 #: ``--quick`` sizes, passed to a benchmark's ``run`` only for the parameters it has.
 QUICK_SIZES: dict[str, Any] = {"n": 300, "repeats": 1, "cells": 12}
 #: Solves per problem in a full run (a component runs with its own defaults).
@@ -466,6 +468,15 @@ def solve_rows(name: str, result: Result) -> list[Row]:
             if "motion_bound_ratio" in ours
             else []
         ),
+        *(
+            [
+                row("duration [s]", "duration_s"),
+                row("flying bound [s]", "flying_bound_s"),
+                row("motion time / flying bound", "flying_bound_ratio"),
+            ]
+            if "flying_bound_ratio" in ours
+            else []
+        ),
         row("max |h| [m]", "max_h_residual_m"),
         Row(label, "NLP iterations", ours["nlp_iterations"]["median"], ours["nlp_iterations"]["p98"]),
     ]
@@ -677,6 +688,11 @@ def select(names: Sequence[str], quick: bool, bench_dir: Path = BENCH_DIR) -> li
     repeats = QUICK_SIZES["repeats"] if quick else PIPELINE_REPEATS
     benchmarks += [
         Benchmark("solve", solve, solve_rows, (problem,), {"repeats": repeats}) for problem in problems
+    ]
+    benchmarks += [
+        Benchmark("solve-flying", solve, solve_rows, (problem,), {"repeats": repeats, "capture": "flying"})
+        for problem in problems
+        if problem in FLYING_PROBLEMS
     ]
     return benchmarks
 

@@ -36,11 +36,12 @@ if TYPE_CHECKING:  # the same names as _LAZY (tests/test_structure.py checks the
     from optlight.capture.folder import FolderCamera
     from optlight.capture.mitsuba import MitsubaCamera
     from optlight.cell import CellResult, design_cell
-    from optlight.motion import Trajectory
+    from optlight.motion import Exposure, Trajectory
     from optlight.objectives import Objective
     from optlight.photometric_stereo import NormalRecovery, recover_normals
     from optlight.pipeline import solve
     from optlight.plan import Plan
+    from optlight.planning.flying import flying_timing
     from optlight.planning.landmarks import Landmark, LandmarkSet, find_landmarks
     from optlight.planning.lightsets import LightSetResult, design_light_set
     from optlight.planning.policy import Reacher
@@ -84,6 +85,8 @@ _LAZY = {
     "ReachabilityMap": "optlight.planning.reach",
     "reachability_map": "optlight.planning.reach",
     "Trajectory": "optlight.motion",
+    "Exposure": "optlight.motion",
+    "flying_timing": "optlight.planning.flying",
     "time_parameterize": "optlight.planning.timing",
     "Waypoints": "optlight.planning.waypoints",
     "controller_waypoints": "optlight.planning.waypoints",

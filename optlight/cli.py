@@ -189,6 +189,11 @@ def _summary_rows(s: dict) -> list[tuple[str, str]]:
             "moving / rest-to-rest bound",
             f"{bound['motion_time_s']:.2f} / {bound['rest_to_rest_s']:.2f} s ({bound['ratio']:.2f}×)",
         ),
+        *(
+            [("moving / flying bound", f"{bound['motion_time_s']:.2f} / {bound['flying_s']:.2f} s ({bound['flying_ratio']:.2f}×)")]
+            if "flying_s" in bound
+            else []
+        ),
         ("peak torque / limit", _torque_cell(s["torque_peak_fraction"])),
         ("verification", "passed" if s["verification_passed"] else "FAILED"),
         ("solve time", f"{s['timings_s']['total']:.2f} s"),
@@ -240,6 +245,8 @@ def _cmd_acquire(args: argparse.Namespace) -> int:
             f"calibrated model: {calibration.light_model} light, power {calibration.power:.3g}, ambient "
             f"{calibration.ambient:.3g}, camera response γ {calibration.gamma:.3g} (calibration.json)"
         )
+        if calibration.lamp is not None:
+            console.print(escape(calibration.lamp.summary()))
     if acquisition.iterations:
         best = acquisition.best
         console.print(  # escaped: a failed re-plan's status names problem-file sections, not rich markup

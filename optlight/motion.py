@@ -4,9 +4,10 @@ each (docs/design.md §6).
 Every stage after the timing sees only this type: the verification, the exports, the figures and the
 preview. A trajectory is a sequence of pieces (a dwell, the motion along a segment, samples read back
 from a CSV file, quintic Hermite polynomials through given points), each evaluated in its own local
-time. The timing laws build the motion pieces: TOPPRA (:mod:`optlight.planning.timing`) and
-jerk-limited (:mod:`optlight.planning.jerk`), both through :func:`assemble_trajectory`, which joins
-[approach,] dwell, motion, dwell, …, dwell[, retreat].
+time. The timing laws build the motion pieces: TOPPRA (:mod:`optlight.planning.timing`),
+jerk-limited (:mod:`optlight.planning.jerk`) and flying (:mod:`optlight.planning.flying`, dwells of
+zero length), all through :func:`assemble_trajectory`, which joins [approach,] dwell, motion, dwell,
+…, dwell[, retreat]. :class:`Exposure` is the camera's exposure and the blur a capture tolerates.
 """
 
 from __future__ import annotations
@@ -160,12 +161,30 @@ class _Scaled:
 # --------------------------------------------------------------------------------------------
 
 
+@dataclass(frozen=True)
+class Exposure:
+    """The camera's exposure and the blur a capture tolerates: ``seconds`` T, the largest angle
+    ``blur_rad`` (rad) the light may turn about the object's centre during T and the largest distance
+    ``blur_m`` (m) it may travel."""
+
+    seconds: float
+    blur_rad: float
+    blur_m: float
+
+    def __post_init__(self) -> None:
+        if not all(np.isfinite(x) and x > 0 for x in (self.seconds, self.blur_rad, self.blur_m)):
+            raise ValueError(f"exposure and blur tolerances must be finite and positive, got {self}")
+
+
+
 class Trajectory:
-    """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark.
+    """A timed joint trajectory q(t), t ∈ [0, duration] (s), with the light still at each landmark for
+    a dwell, or passing it (a dwell of zero length: flying captures,
+    :func:`~optlight.planning.flying.flying_timing`).
 
     Attributes (all times in seconds from the start):
         landmark_intervals: (M, 2) start and end of the dwell at each landmark.
-        capture_times: (M,) middle of each dwell, when the image is exposed.
+        capture_times: (M,) middle of each dwell (the instant of a flying capture).
         segment_times: (M−1, 2) start and end of the motion from landmark i to landmark i+1
             (start = end for a segment without motion).
         joint_names: names of the n joints, or None.
@@ -206,6 +225,27 @@ class Trajectory:
     def capture_times(self) -> Array:
         """(M,) exposure times (s): the middle of each landmark's dwell."""
         return self.landmark_intervals.mean(axis=1)
+
+    def trigger_times(self, settle_s: float) -> Array:
+        """(M,) camera triggers (s): ``settle_s`` into each dwell, or the instant of a dwell of zero
+        length (a flying capture: the light passes the landmark then). ValueError when ``settle_s`` is
+        negative or not shorter than a dwell that has a length."""
+        lengths = self.landmark_intervals[:, 1] - self.landmark_intervals[:, 0]
+        stops = lengths > 0
+        if not (settle_s >= 0 and np.all(settle_s < lengths[stops])):
+            raise ValueError(
+                f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell "
+                f"({lengths[stops].min(initial=np.inf):.6g} s)"
+            )
+        return self.landmark_intervals[:, 0] + np.where(stops, settle_s, 0.0)
+
+    def exposure_windows(self, settle_s: float, exposure_s: float) -> Array:
+        """(M, 2) start and end (s) of each capture's exposure of ``exposure_s``: from the trigger on
+        after a stop (:meth:`trigger_times`), centred on the trigger on the fly, within [0, duration]."""
+        triggers = self.trigger_times(settle_s)
+        flying = self.landmark_intervals[:, 1] == self.landmark_intervals[:, 0]
+        start = triggers - np.where(flying, 0.5 * exposure_s, 0.0)
+        return np.clip(np.column_stack([start, start + exposure_s]), 0.0, self.duration)
 
     @property
     def boundaries(self) -> Array:

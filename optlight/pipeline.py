@@ -23,8 +23,10 @@ the solve draws nothing and writes nothing):
    of about :data:`NLP_WINDOW_KNOTS` knots cut at captures (:func:`optimize_path`), with the view
    rows (``[view]``) and clearance rows (``[environment] enabled``); where it finds no way on the
    sphere, the segments whose arc the per-knot IK could not follow leave it
-   (:func:`optimize_window`); the transfers from the start configuration to the first capture and
-   back (``[trajectory] return_home``);
+   (:func:`optimize_window`); where the motion between two knots comes too close to an obstacle
+   (or itself), that segment is refined and solved again
+   (:func:`~optlight.planning.trajectory.clear_between_knots`); the transfers from the start
+   configuration to the first capture and back (``[trajectory] return_home``);
 6. ``timing``: per landmark pair, jerk-limited (:mod:`optlight.planning.jerk`, the default) or
    TOPPRA (``[trajectory] timing``), with a dwell at every landmark;
 7. ``verify``: the controller waypoints chosen (:func:`~optlight.planning.waypoints.controller_waypoints`),
@@ -52,6 +54,7 @@ from optlight.errors import CaptureSolverError, OutOfReachError, SolverError
 from optlight.geometry import LightSphere
 from optlight.motion import Trajectory
 from optlight.plan import Plan
+from optlight.planning.flying import exposure_of, flying_timing
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.landmarks import Landmark, LandmarkSet, distinct_landmarks, find_landmarks
 from optlight.planning.lightsets import Grid, SetCost, grid_from_problem, set_cost_from_problem
@@ -62,6 +65,7 @@ from optlight.planning.policy import (
     Reacher,
     knot_ik,
     place_landmarks,
+    tour_costs,
     visiting_order,
 )
 from optlight.planning.set_landmarks import (
@@ -75,7 +79,9 @@ from optlight.planning.timing import time_parameterize
 from optlight.planning.torque_scaling import within_torque_limits
 from optlight.planning.trajectory import (
     TrajectoryNLPResult,
+    clear_between_knots,
     follow_planned_path,
+    joined_results,
     knot_cost,
     knots_on_arcs,
     optimize_knots,
@@ -158,7 +164,11 @@ def solve(
     notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 
     with stage("path"):
-        order = tour_order(placement.thetas) if design is not None else visiting_order(trajectory_spec, placement)
+        order = (
+            tour_order(placement.thetas, tour_costs(trajectory_spec, cell.limits, placement.thetas))
+            if design is not None
+            else visiting_order(trajectory_spec, cell.limits, placement)
+        )
         visited = tuple(placement.landmarks[i] for i in order)
         landmark_thetas = placement.thetas[order]
         positions = np.array([lm.position for lm in visited])
@@ -181,6 +191,8 @@ def solve(
                     landmark_thetas,
                     lambda d, t: notify("nlp", d, t),
                 )
+                clear = clear_between_knots(cell, trajectory_spec, setup.solver, path, warm, nlp, knots_on_path)
+                path, warm, nlp = clear.path, clear.warm, clear.nlp
                 break
             except CaptureSolverError as error:
                 if not setup.landmark_spec.allow_partial or len(visited) < 2:
@@ -209,7 +221,7 @@ def solve(
         )
 
     with stage("timing"):
-        timed_path, timed_knots = knots_on_path(cell, path, nlp.theta)
+        timed_path, timed_knots = clear.timed_path, clear.timed_knots
         trajectory = time_knots(setup, timed_path, timed_knots)
         dwell = float(np.sum(np.diff(trajectory.landmark_intervals, axis=1)))
         # before it is sampled: its samples must fit in this machine's memory
@@ -438,7 +450,7 @@ def optimize_path(
         results.append(result)
         if progress is not None:
             progress(done + 1, len(windows))
-    return path.with_transfers(transfers), warm, _joined(results, theta, knot_cost(cell, theta))
+    return path.with_transfers(transfers), warm, joined_results(results, theta, knot_cost(cell, theta))
 
 
 def optimize_window(
@@ -470,21 +482,6 @@ def optimize_window(
     path = path.with_transfers(unfollowed)
     warm, _ = knot_ik(cell, path, landmark_thetas)
     return path, warm, nlp(path, warm, fixed_start)
-
-
-def _joined(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -> TrajectoryNLPResult:
-    """One result for the windows' solves ``results`` (a window solved again with the one before it
-    counts twice) at the knots ``theta`` (K, n) of ``cost``: iterations and times added, the largest
-    |h|, the statuses that occurred."""
-    return TrajectoryNLPResult(
-        theta=theta,
-        success=all(r.success for r in results),
-        status=", ".join(dict.fromkeys(r.status for r in results)),
-        cost=cost,
-        max_h_residual=max(r.max_h_residual for r in results),
-        iterations=sum(r.iterations for r in results),
-        time_s=sum(r.time_s for r in results),
-    )
 
 
 def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
@@ -547,7 +544,8 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     start configuration to the first capture and back (``[trajectory] return_home``; back the way it
     came when the direct way fails, shortened by the transfer NLP), then per
     landmark pair jerk-limited (the default) or TOPPRA (``[trajectory] timing``) profiles, with a
-    dwell of ``dwell_s`` at every landmark; each segment's spline within the joint limits and, on the
+    dwell of ``dwell_s`` at every landmark (``[trajectory] capture = "flying"``: one jerk-limited motion
+    through the landmarks at their blur-limited speeds, :func:`~optlight.planning.flying.flying_timing`); each segment's spline within the joint limits and, on the
     sphere, within :data:`~optlight.planning.trajectory.PATH_DEVIATION_M` of the planned path
     (:func:`~optlight.planning.trajectory.follow_planned_path`); the whole motion slowed where its
     joint torques would exceed the robot's limits
@@ -569,6 +567,20 @@ def time_knots(setup: Setup, path: LightPath, theta: Array) -> Trajectory:
     def timed(scale: float) -> Trajectory:
         """The motion timed with the limits scaled for the torques (planning/torque_scaling.py)."""
         v, a, j = np.sqrt(scale) * limits.velocity, scale * limits.acceleration, scale**1.5 * limits.jerk
+        if spec.capture == "flying":
+            return flying_timing(
+                segments,
+                v,
+                a,
+                j,
+                light_positions=setup.robot.light_positions,
+                center=setup.sphere.center,
+                exposure=exposure_of(spec),
+                joint_names=setup.robot.joint_names,
+                approach=approach,
+                retreat=retreat,
+                position_bounds=(limits.lower, limits.upper),
+            )
         timing: Callable[..., Trajectory] = (
             partial(jerk_limited_timing, segments, v, a, j)
             if spec.timing == "jerk_limited"
@@ -598,7 +610,7 @@ def verify_knots(
     (m), deviation from the path of the knots ``theta`` (K, n) except on the ``transfers`` (M − 1,),
     where the light must stay outside the sphere, the environment by exact coal distances, the
     camera's view and the beam by exact ray casting at the captures, the joint torques (the lamp
-    included) against the robot's torque limits, and the quintic interpolation of the controller
+    included) against the robot's torque limits, the blur of every exposure, and the quintic interpolation of the controller
     ``waypoints`` (joint_trajectory.yaml's points) against the trajectory."""
     robot, limits, spec, environment = setup.robot, setup.limits, setup.trajectory_spec, setup.environment
     return verify_trajectory(
@@ -625,5 +637,7 @@ def verify_knots(
         ),
         waypoints=waypoints,
         dynamics=setup.dynamics,
+        exposure=exposure_of(spec),
+        exposure_windows=trajectory.exposure_windows(spec.settle_s, spec.exposure_s),
         rate_hz=max(1000.0, spec.rate_hz),
     )

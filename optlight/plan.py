@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from optlight.datasets import ModelCapture, files_writer, model_capture
 from optlight.environment import OBJECT
 from optlight.motion import Trajectory
-from optlight.planning.jerk import rest_to_rest_moves
+from optlight.planning.jerk import nonstop_bound, rest_to_rest_moves
 from optlight.planning.landmarks import Landmark, LandmarkSet
 from optlight.planning.path import LightPath
 from optlight.planning.reach import ReachabilityMap
@@ -103,7 +103,13 @@ class Plan:
         first capture and back when the plan makes those moves, under the plan's velocity, acceleration and jerk limits
         (:func:`~optlight.planning.jerk.rest_to_rest_moves`, ruckig), independent of the plan's
         paths. ``ratio`` = moving time / bound (≥ 1); the ``between_captures`` pair leaves out the
-        moves from and to the start."""
+        moves from and to the start.
+
+        With flying captures also ``flying_s``, a bound for any motion through the same postures in
+        the same order that need not stop at them (:func:`~optlight.planning.jerk.nonstop_bound`:
+        the joints' velocity limits on every move, and each joint's stops where its own positions
+        turn; the jerk limit and the blur speeds are left out, so it is loose), and ``flying_ratio``
+        = moving time / flying_s."""
         trajectory, limits = self.trajectory, self.setup.limits
         intervals = trajectory.landmark_intervals
         approach = bool(intervals[0, 0] > 0)
@@ -116,13 +122,17 @@ class Plan:
         inner = moves[int(approach) : moves.size - int(retreat)]
         segments = trajectory.segment_times
         bound = float(moves.sum())
-        return {
+        out = {
             "motion_time_s": self.motion_time,
             "rest_to_rest_s": bound,
             "ratio": self.motion_time / bound if bound > 0 else 1.0,
             "between_captures_s": float(np.sum(segments[:, 1] - segments[:, 0])),
             "between_captures_rest_to_rest_s": float(inner.sum()),
         }
+        if self.problem.trajectory.capture == "flying":
+            flying = nonstop_bound(postures, limits.velocity, limits.acceleration)
+            out |= {"flying_s": flying, "flying_ratio": self.motion_time / flying if flying > 0 else 1.0}
+        return out
 
     @property
     def light_directions_camera(self) -> Array:

@@ -49,7 +49,7 @@ from optlight.planning.waypoints import Waypoints
 from optlight.scene import Scene
 from optlight.setup import Setup
 from optlight.stages import OptimizedPath
-from optlight.verify import VerificationReport
+from optlight.verify import VerificationReport, capture_exposures
 from optlight.viz.drawing import FigureJob
 from optlight.viz.figures import LANDMARK_FIGURES, landmark_figures
 from optlight.viz.trajectory_figures import path_figure, trajectory_figure
@@ -195,6 +195,15 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         f"| moving time / rest-to-rest bound (time-optimal stops at the same postures) | "
         f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['rest_to_rest_s']:.2f} s "
         f"({s['motion_bound']['ratio']:.2f}×) |",
+        *(
+            [
+                f"| moving time / flying bound (any motion through the same postures, stopping only where a joint turns) | "
+                f"{s['motion_bound']['motion_time_s']:.2f} s / {s['motion_bound']['flying_s']:.2f} s "
+                f"({s['motion_bound']['flying_ratio']:.2f}×) |"
+            ]
+            if "flying_s" in s["motion_bound"]
+            else []
+        ),
         f"| timing | {setup.trajectory_spec.timing.replace('_', '-')}, exported at "
         f"{setup.trajectory_spec.rate_hz:g} Hz |",
         f"| controller waypoints (joint_trajectory.yaml) | {s['controller_waypoints']} |",
@@ -227,7 +236,9 @@ def report_markdown(plan: PlanRecord, summary: Mapping[str, Any], figures: Seque
         "- `joint_trajectory.yaml` (ROS 2 JointTrajectory) and `trajectory.csv`: the motion; "
         "`captures.csv`: per capture the camera trigger (`trigger_s`), the image name, the light's "
         "`zenith_deg` and `azimuth_deg` (the angles `optlight render --zenith --azimuth` takes), its "
-        "direction, its position (`light_position_*_m`, world frame, m) and the joint angles.",
+        "direction, its position (`light_position_*_m`, world frame, m), the joint angles, the exposure "
+        "(`exposure_start_s`, `exposure_end_s`: start the camera's exposure at the first) and the blur the "
+        "motion gives it (`blur_deg` about the object's centre, `blur_mm`).",
         f"- Light directions ({holders}): {LIGHT_FRAME}.",
         "- Image names: the same in every file that names the images.",
         "",
@@ -398,6 +409,9 @@ def save_results(
                 light_positions=np.array([lm.position for lm in visited]),
                 light_angles_deg=np.rad2deg([(lm.zenith, lm.azimuth) for lm in visited]).reshape(-1, 2),
                 joint_names=robot.joint_names,
+                exposures=capture_exposures(
+                    trajectory, traj_spec.settle_s, traj_spec.exposure_s, robot.light_pose, setup.sphere.center
+                ),
             )
         ]
 

@@ -61,9 +61,13 @@ def test_discovery_and_default_selection(runner: ModuleType, bench_dir: Path) ->
     assert list(runner.components(bench_dir)) == ["broken", "fake"]
     selected = runner.select([], quick=False, bench_dir=bench_dir)
     problems = list(runner.available_problems())
-    assert [b.name for b in selected] == ["broken", "fake", *["solve"] * len(problems)]
-    assert [b.args for b in selected[2:]] == [(p,) for p in problems]
-    assert all(b.sizes == {"repeats": runner.PIPELINE_REPEATS} for b in selected[2:])
+    flying = [p for p in problems if p in runner.FLYING_PROBLEMS]
+    assert flying == list(runner.FLYING_PROBLEMS)  # every problem solved flying is shipped
+    solves = 2 + len(problems)
+    assert [b.name for b in selected] == ["broken", "fake", *["solve"] * len(problems), *["solve-flying"] * len(flying)]
+    assert [b.args for b in selected[2:]] == [(p,) for p in (*problems, *flying)]
+    assert all(b.sizes == {"repeats": runner.PIPELINE_REPEATS} for b in selected[2:solves])
+    assert all(b.sizes == {"repeats": runner.PIPELINE_REPEATS, "capture": "flying"} for b in selected[solves:])
     assert all(b.sizes == {} for b in selected[:2])
 
 

@@ -99,6 +99,16 @@ def test_defaults_fill_missing_keys(tmp_path: Path) -> None:
         (lambda d: d["robot"].update(jerk_limit="fast"), "robot.jerk_limit", "a finite number"),
         (lambda d: d["trajectory"].update(rate_hz=0.0), "trajectory.rate_hz", "> 0"),
         (lambda d: d["trajectory"].update(timing="fast"), "trajectory.timing", "'jerk_limited', 'toppra'"),
+        (lambda d: d["trajectory"].update(capture="sometimes"), "trajectory.capture", "'stop', 'flying'"),
+        (
+            lambda d: d["trajectory"].update(capture="flying", timing="toppra"),
+            "trajectory.capture",
+            "flying captures are timed jerk-limited",
+        ),
+        (lambda d: d["trajectory"].update(exposure_s=0.0), "trajectory.exposure_s", "> 0"),
+        (lambda d: d["trajectory"].update(exposure_s=0.4), "trajectory.exposure_s", "ends within the dwell"),
+        (lambda d: d["trajectory"].update(blur_deg=-0.1), "trajectory.blur_deg", "> 0"),
+        (lambda d: d["trajectory"].update(blur_mm=0.0), "trajectory.blur_mm", "> 0"),
     ],
 )
 def test_bad_values_name_file_and_key(tmp_path: Path, mutate, key: str, fragment: str) -> None:

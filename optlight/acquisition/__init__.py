@@ -8,14 +8,18 @@ dataset folder.
 
 1. plan on the model (:func:`optlight.solve`: landmarks, placement, trajectory, verification);
 2. a simulated robot executes the verified trajectory: at each capture's trigger (the dwell's start
-   plus ``[trajectory] settle_s``) the joint angles are the trajectory's, and the light is where
-   pinocchio's forward kinematics puts it (``plan.robot.light_pose``); the camera captures there;
+   plus ``[trajectory] settle_s``) the joint angles are the trajectory's, and the nominal light
+   frame is where pinocchio's forward kinematics of the problem's robot puts it (``light_pose``:
+   position and rotation, which the lamp's calibration is relative to); the camera captures there,
+   its world placing the real lamp relative to that frame;
 3. the *measured* cost of the plan is the mean over its captures of the problem's objective on the
    recorded images (``setup.objective``, never the model that planned); the *modelled* cost the
-   same objective on the planning model's images at the same light positions;
+   same objective on the planning model's images where that model believes the lights were (its
+   light frame, moved to the calibrated lamp, at the same joint angles);
 4. the model is calibrated from every usable capture so far (:func:`~optlight.capture.calibration.calibrate`)
-   and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`),
-   through the same :func:`optlight.solve`;
+   and the next plan made on the calibrated model (:func:`~optlight.capture.calibration.calibrated_setup`:
+   its light, albedo, response and the robot's light frame on the calibrated lamp), through the same
+   :func:`optlight.solve`;
 5. the loop stops after ``[loop] iterations`` plans, as soon as a plan's measure is not at
    least ``[loop] tolerance`` (relative) below the best so far, or when a re-plan fails to solve or
    fails verification (the reason is the status; the first plan's is raised). The best plan by its

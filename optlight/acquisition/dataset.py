@@ -14,10 +14,12 @@ import numpy as np
 from optlight.acquisition.rounds import round_folder
 from optlight.capture import Capture, write_capture_png
 from optlight.capture.calibration import Calibration
+from optlight.capture.lamp import LampCalibration
 from optlight.export import MANIFEST, lp_direction, lp_text, write_captures
 from optlight.jsondata import json_safe
 from optlight.plan import Plan
 from optlight.scene import Scene
+from optlight.verify import capture_exposures
 
 
 def write_round_plans(root: Path, plans: Sequence[Plan]) -> list[str]:
@@ -53,11 +55,20 @@ def write_document(root: Path, document: dict[str, Any]) -> str:
     return "acquisition.json"
 
 
-def write_captures_folder(folder: Path, plan: Plan, captures: Sequence[Capture]) -> list[str]:
-    """A round's images, captures.csv and lights.lp in ``folder``; returns the names written."""
+def write_captures_folder(
+    folder: Path, plan: Plan, captures: Sequence[Capture], lamp: LampCalibration | None = None
+) -> list[str]:
+    """A round's images, captures.csv and lights.lp in ``folder``; returns the names written. The
+    lights are where ``lamp`` (the calibrated lamp on the flange) puts them, a + R δ, for the
+    captures whose light rotation is known; the nominal light frame's positions otherwise."""
     spec = plan.problem.trajectory
     folder.mkdir(parents=True, exist_ok=True)
-    positions = np.array([c.light_position for c in captures])
+    positions = np.array(
+        [
+            c.light_position if lamp is None or c.light_rotation is None else c.light_position + c.light_rotation @ lamp.offset_m
+            for c in captures
+        ]
+    )
     directions = positions - plan.setup.sphere.center
     directions = plan.scene.camera.to_camera_frame(
         directions / np.linalg.norm(directions, axis=1, keepdims=True)
@@ -71,6 +82,9 @@ def write_captures_folder(folder: Path, plan: Plan, captures: Sequence[Capture])
         light_positions=positions,
         light_angles_deg=np.rad2deg(np.column_stack(plan.setup.sphere.angles(positions))),
         joint_names=plan.robot.joint_names,
+        exposures=capture_exposures(
+            plan.trajectory, spec.settle_s, spec.exposure_s, plan.robot.light_pose, plan.setup.sphere.center
+        ),
     )
     names = [spec.image_pattern.format(index=i) for i in range(len(captures))]
     for name, capture in zip(names, captures, strict=True):

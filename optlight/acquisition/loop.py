@@ -3,6 +3,7 @@ until a round no longer improves (the package docstring gives the steps)."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -12,12 +13,13 @@ import numpy as np
 from optlight.acquisition.measures import improves, measured_costs, modelled_costs, round_measure
 from optlight.acquisition.result import Acquisition, Iteration
 from optlight.acquisition.rounds import AWAITING, RoundFolders, round_setup
-from optlight.capture import Capture, CaptureCamera, ModelCamera
+from optlight.capture import Array, Capture, CaptureCamera, ModelCamera
 from optlight.capture.calibration import calibrate, calibrated_setup
 from optlight.capture.folder import MissingCaptureError
 from optlight.errors import OptlightError, VerificationError
 from optlight.pipeline import solve
 from optlight.plan import Plan
+from optlight.robot import Robot
 from optlight.setup import Setup
 from optlight.spec import Problem
 
@@ -47,13 +49,32 @@ def make_camera(kind: str, setup: Setup, folder: str | Path | None = None) -> Ca
     raise OptlightError(f"unknown camera {kind!r} (one of {', '.join(CAMERAS)})")
 
 
-def execute(plan: Plan, camera: CaptureCamera) -> list[Capture]:
+def execute(plan: Plan, camera: CaptureCamera, robot: Robot | None = None) -> list[Capture]:
     """The simulated robot runs ``plan``'s trajectory; one capture per dwell at its trigger time, with
-    the light where forward kinematics puts it (module docstring, step 2)."""
+    the nominal light frame where forward kinematics of ``robot`` (default the plan's) puts it (module
+    docstring, step 2). The loop passes the problem's robot: a plan on a calibrated lamp moves the
+    robot with the lamp's estimated frame, while the camera's world places the real lamp relative to
+    the nominal one."""
+    nominal = plan.robot if robot is None else robot
+    captures = []
+    for k, q in enumerate(trigger_joints(plan)):
+        position, rotation = nominal.light_pose(q)
+        if camera.kind == "folder":
+            # its image is the row of the light position the plan wrote into captures.csv (the plan's
+            # light frame); the capture keeps the nominal frame's pose, as the simulated ones do
+            found = camera.capture(plan.robot.light_pose(q)[0], k, rotation)
+            captures.append(dataclasses.replace(found, light_position=position))
+        else:
+            captures.append(camera.capture(position, k, rotation))
+    return captures
+
+
+def trigger_joints(plan: Plan) -> Array:
+    """The joint angles (K, n) at ``plan``'s capture triggers (:meth:`~optlight.motion.Trajectory.trigger_times`:
+    after a stop, dwell start + ``settle_s``; on the fly, the instant the light is at the landmark)."""
     trajectory = plan.trajectory
-    trigger = trajectory.landmark_intervals[:, 0] + plan.problem.trajectory.settle_s
-    joints = trajectory.sample(trigger)[0]
-    return [camera.capture(plan.robot.light_pose(q)[0], k) for k, q in enumerate(joints)]
+    trigger = trajectory.trigger_times(plan.problem.trajectory.settle_s)
+    return np.asarray(trajectory.sample(trigger)[0], float)
 
 
 def acquire(
@@ -90,7 +111,7 @@ def acquire(
             status = failure
             break
         notify(i, "capture", 0, len(plan.visited))
-        captures = _round_captures(plan, device, i)
+        captures = _round_captures(plan, device, i, setup.robot)
         if captures is None:
             status, next_plan = AWAITING, plan
             break
@@ -135,14 +156,17 @@ def _round_plan(
     return plan, ""
 
 
-def _round_captures(plan: Plan, device: CaptureCamera | RoundFolders, i: int) -> list[Capture] | None:
-    """The captures of round ``i``'s plan, or None when its images are not there yet (the round awaits
-    them). Images of a round that do not match its plan again are an error."""
+def _round_captures(
+    plan: Plan, device: CaptureCamera | RoundFolders, i: int, robot: Robot
+) -> list[Capture] | None:
+    """The captures of round ``i``'s plan with the nominal light frames of ``robot``, or None when its
+    images are not there yet (the round awaits them). Images of a round that do not match its plan
+    again are an error."""
     current = device.camera(i) if isinstance(device, RoundFolders) else device
     if current is None:
         return None
     try:
-        return execute(plan, current)
+        return execute(plan, current, robot)
     except MissingCaptureError as e:
         if isinstance(device, RoundFolders):
             raise OptlightError(
@@ -167,7 +191,8 @@ def _iteration(
     """Round ``i`` judged and calibrated: its measured and modelled costs, the calibration from every
     usable capture so far (``pool``; None and why when it fails) and the round's measure."""
     measured = measured_costs(setup, captures)
-    modelled = modelled_costs(model, [c.light_position for c in captures])
+    # where the model believes the lights were: its (calibrated) light frame at the same joints
+    modelled = modelled_costs(model, plan.robot.light_positions(trigger_joints(plan)))
     notify(i, "calibrate", 0, 1)
     calibration, error = None, None
     try:

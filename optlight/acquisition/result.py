@@ -177,8 +177,8 @@ class Acquisition:
                 f"the camera are in {sub}/",
                 f"  1. move the robot to the first point of {sub / 'joint_trajectory.yaml'} (a ROS 2 "
                 "JointTrajectory; trajectory.csv holds the same motion sampled in time) and run it",
-                f"  2. trigger the camera at each trigger_s of {sub / 'captures.csv'} (seconds from the start "
-                f"of the motion; the light rests there from dwell_start_s to dwell_end_s): {len(names)} images",
+                f"  2. start the camera's exposure at each exposure_start_s of {sub / 'captures.csv'} (seconds "
+                f"from the start of the motion; the light is at its landmark at trigger_s): {len(names)} images",
                 f"  3. save each image under the name in the image column of its row ({names[0]} … {names[-1]}) "
                 f"in {sub}/: PNG or TIFF, {camera.width}×{camera.height} px, with the camera's settings "
                 "(exposure, gain, response) those of every other round",
@@ -289,7 +289,8 @@ class Acquisition:
                 sub = Path("iterations") / f"{it.index:02d}"
                 files += [str(sub / f) for f in write_captures_folder(root / sub, it.plan, it.captures)]
         if self.iterations:
-            files += write_captures_folder(root, self.best.plan, self.best.captures)
+            lamp = None if self.calibration is None else self.calibration.lamp
+            files += write_captures_folder(root, self.best.plan, self.best.captures, lamp)
         if self.calibration is not None:
             files += write_calibration(root, self.setup.scene, self.calibration)
         if self.iterations:

@@ -12,8 +12,11 @@ implementations:
 - :class:`optlight.capture.folder.FolderCamera`: the files a real camera wrote, matched to the
   captures by ``captures.csv``.
 
-The world of the model and physically based cameras. The robot puts the light at a; the real light
-is at a' = a + δ (δ = ``light_offset_m``), of power E' = ``power_scale``·E; the ambient is k' (the
+The world of the model and physically based cameras. The robot puts the nominal light frame at a with
+rotation R (world, m; the light emits along its +z); the real lamp is at a' = a + R·δ_L + δ
+(δ_L = ``lamp_offset_m``, on the flange, in the light frame: it turns with the arm; δ = ``light_offset_m``
+in the world frame) with its axis R·R_L·ẑ (R_L from ``lamp_rpy_deg``), of power E' = ``power_scale``·E;
+a capture without R (the servo's, a reference photograph) takes R_L = I and δ_L = 0. The ambient is k' (the
 model's unless ``ambient`` is set); the albedo at a surface point x is
 
     ρ'(x) = ``albedo_scale`` · ρ(x) · (1 + t sin(2πx₁/λ) sin(2πx₂/λ) sin(2πx₃/λ)),
@@ -47,15 +50,18 @@ class Capture:
     """One captured image.
 
     ``image`` (H, W): the recorded values Y in the renderer's units (``saturation`` is full scale);
-    ``light_position`` (3,): where the robot put the light (world, m), which the calibration takes as
-    the light's position; ``index``: the capture's number in its plan; ``exposure``: what the camera
-    reports about the shot (camera kind, gain, saturation, response applied to the file, samples,
-    file name …)."""
+    ``light_position`` (3,): where the robot put the nominal light frame (world, m), which the
+    calibration takes as the light's position up to the lamp's offset on the flange;
+    ``light_rotation`` (3, 3): that frame's rotation in the world (None when the pose is not known, as
+    for the servo's captures: the lamp calibration leaves the capture out); ``index``: the capture's
+    number in its plan; ``exposure``: what the camera reports about the shot (camera kind, gain,
+    saturation, response applied to the file, samples, file name …)."""
 
     image: Array
     light_position: Array
     index: int = 0
     exposure: Mapping[str, Any] = field(default_factory=dict)
+    light_rotation: Array | None = None
 
 
 class CaptureCamera(Protocol):
@@ -66,10 +72,32 @@ class CaptureCamera(Protocol):
     #: "model", "mitsuba" or "folder".
     kind: str
 
-    def capture(self, light_position: ArrayLike, index: int = 0) -> Capture:
-        """The image with the light at ``light_position`` (world, m); ``index`` is the capture's
-        number in its plan (the folder camera reports it when no file matches)."""
+    def capture(self, light_position: ArrayLike, index: int = 0, light_rotation: ArrayLike | None = None) -> Capture:
+        """The image with the nominal light frame at ``light_position`` (world, m) and
+        ``light_rotation`` (3, 3; None: unknown); ``index`` is the capture's number in its plan (the
+        folder camera reports it when no file matches)."""
         ...
+
+
+def real_lamp(light_position: ArrayLike, light_rotation: ArrayLike | None, world: WorldSpec) -> tuple[Array, Array | None]:
+    """The real lamp's position a' = a + R·δ_L + δ (world, m) and axis R·R_L·ẑ (None without R) of the
+    module docstring for the nominal light frame at ``light_position`` a with ``light_rotation`` R."""
+    a = np.asarray(light_position, float) + np.asarray(world.light_offset_m, float)
+    if light_rotation is None:
+        return a, None
+    rotation = np.asarray(light_rotation, float)
+    tilt = _rpy_matrix(world.lamp_rpy_deg)
+    return a + rotation @ np.asarray(world.lamp_offset_m, float), rotation @ tilt[:, 2]
+
+
+def _rpy_matrix(rpy_deg: ArrayLike) -> Array:
+    """R = Rz(yaw)·Ry(pitch)·Rx(roll) of URDF roll, pitch, yaw (deg), as the robot's light frame."""
+    r, p, y = np.deg2rad(np.asarray(rpy_deg, float))
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return rz @ ry @ rx
 
 
 def world_albedo(points: ArrayLike, albedo: ArrayLike, world: WorldSpec) -> Array:
@@ -108,10 +136,11 @@ class ModelCamera:
         )
         self._rng = np.random.default_rng(world.seed)
 
-    def capture(self, light_position: ArrayLike, index: int = 0) -> Capture:
-        """Render with the real light at a + δ; noise, clip and response as in the module docstring."""
+    def capture(self, light_position: ArrayLike, index: int = 0, light_rotation: ArrayLike | None = None) -> Capture:
+        """Render with the real lamp at a' (:func:`real_lamp`; the model's light has no axis); noise,
+        clip and response as in the module docstring."""
         a = np.asarray(light_position, float)
-        real = a + np.asarray(self.world.light_offset_m, float)
+        real, _ = real_lamp(a, light_rotation, self.world)
         noise = self._rng if self.world.noise_std > 0 else False
         image = self._world_scene.to_image(self._world_scene.pixels(real, noise=noise))
         exposure = {
@@ -120,7 +149,12 @@ class ModelCamera:
             "saturation": self.scene.light.saturation,
             "linearised_gamma": 1.0,
         }
-        return Capture(image, a, index, exposure)
+        return Capture(image, a, index, exposure, _rotation(light_rotation))
+
+
+def _rotation(light_rotation: ArrayLike | None) -> Array | None:
+    """``light_rotation`` as a (3, 3) array, or None."""
+    return None if light_rotation is None else np.asarray(light_rotation, float).reshape(3, 3)
 
 
 def write_capture_png(path: str | Path, image: ArrayLike, saturation: float) -> Path:

@@ -34,6 +34,13 @@ Robust fit:
    a 10 cm deep face is up to ~1.8×, which a directional model can only absorb into a wrong γ (a 5 cm
    disk lamp in the physically based camera calibrated to γ = 0.41 with the directional model).
 
+6. (``[loop] lamp = "calibrate"``, every used capture's light rotation known) the lamp's pose on the
+   flange (:mod:`optlight.capture.lamp`) is fitted on the chosen model's used entries, linearised
+   with its γ; when some of it is identifiable, steps 2–5 run again with the lights where the
+   calibrated lamp puts them, a' = a + R δ, and the lamp is fitted again from that fit
+   (:data:`LAMP_ROUNDS` times in all): the shading's light positions and (A, B, c, γ) are
+   estimated jointly by alternating between the two fits.
+
 Normals: where three or more used lights light a pixel, photometric stereo
 (:func:`optlight.photometric_stereo.recover_normals`, distant lights from O, strength A, the fitted
 ambient image subtracted) on the linearised images; the calibrated model takes them where
@@ -48,18 +55,21 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
+import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from optlight.capture import Array, Capture
+from optlight.capture.lamp import LampCalibration, fit_lamp
 from optlight.errors import OptlightError
 from optlight.objectives import Objective
 from optlight.photometric_stereo import recover_normals
+from optlight.robot import Dynamics, load_robot
 from optlight.scene import Scene
 from optlight.scene.render import cosine_and_falloff
 from optlight.scene.response import linearise, respond
-from optlight.setup import Setup
-from optlight.spec import LightSpec, LoopSpec
+from optlight.setup import Setup, lamp_of
+from optlight.spec import LightSpec, LoopSpec, RobotSpec
 
 #: Range of the response γ searched.
 GAMMA_RANGE = (0.25, 4.0)
@@ -69,6 +79,9 @@ ROUNDS, SWEEPS = 3, 40
 MAD_FLOOR = 1e-3
 #: The light models the calibration chooses between (module docstring, step 5).
 LIGHT_MODELS: tuple[Literal["directional", "point"], ...] = ("directional", "point")
+#: Most alternations between the photometric fit and the lamp's, and the change of the lamp's
+#: positions (m) below which they stop (module docstring, step 6).
+LAMP_ROUNDS, LAMP_TOLERANCE_M = 8, 2e-4
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,7 +97,9 @@ class Calibration:
     the captures fitted; ``rejected``: index → why it was left out; ``entries``: how many (capture,
     pixel) entries were used, saturated, shadowed (edges and cast shadows) and specular; ``specular``
     (len(used), P): the entries left out as specular;
-    ``residual_rms``: of Y − Ŷ over the used entries (renderer units)."""
+    ``residual_rms``: of Y − Ŷ over the used entries (renderer units); ``lamp``: the lamp's pose on
+    the flange (step 6; None when not fitted: ``[loop] lamp = "nominal"`` or a capture without its
+    light rotation), the fit's positions being where that lamp puts the lights."""
 
     light_model: Literal["directional", "point"]
     model_residual_rms: dict[str, float]
@@ -101,6 +116,7 @@ class Calibration:
     entries: dict[str, int]
     residual_rms: float
     specular: NDArray[np.bool_]
+    lamp: LampCalibration | None = None
 
     def light(self, model: LightSpec) -> LightSpec:
         """The model's light with the calibrated light model, power and ambient."""
@@ -128,6 +144,7 @@ class Calibration:
             "rejected_captures": {str(k): v for k, v in self.rejected.items()},
             "entries": dict(self.entries),
             "residual_rms": self.residual_rms,
+            "lamp": None if self.lamp is None else self.lamp.to_dict(),
         }
 
 
@@ -173,15 +190,23 @@ def calibrate(scene: Scene, captures: Sequence[Capture], spec: LoopSpec) -> Cali
             + "".join(f"; capture {k}: {why}" for k, why in rejected.items())
         )
     y = recorded[list(used)]
-    positions = np.array([captures[k].light_position for k in used], float)
-    fits = {m: _robust_fit(_with_light_model(scene, m), y, positions, spec) for m in LIGHT_MODELS}
-    both = np.logical_and.reduce([f.weights for f in fits.values()])
-    residual: dict[str, float] = {
-        m: float(np.sqrt(np.mean((y - respond(f.fit.prediction, s, f.fit.gamma))[both] ** 2))) if both.any() else np.inf
-        for m, f in fits.items()
-    }
-    model = min(LIGHT_MODELS, key=lambda m: (residual[m], m != scene.light.model))
-    chosen = fits[model]
+    nominal = np.array([captures[k].light_position for k in used], float)
+    rotations = [captures[k].light_rotation for k in used]
+    model, chosen, residual = _photometric_fit(scene, y, nominal, spec)
+    positions, lamp = nominal, None
+    if spec.lamp == "calibrate" and all(r is not None for r in rotations):
+        frames = np.array(rotations, float)
+        for _ in range(LAMP_ROUNDS):
+            fit = chosen.fit
+            lamp = fit_lamp(
+                chosen.scene, linearise(y, s, fit.gamma), chosen.weights, nominal, frames,
+                fit.c * chosen.scene.gbuffer.albedo, fit.a, fit.b,
+            )
+            moved = lamp.positions(nominal, frames)
+            if np.max(np.linalg.norm(moved - positions, axis=1), initial=0.0) <= LAMP_TOLERANCE_M:
+                break
+            positions = moved
+            model, chosen, residual = _photometric_fit(scene, y, positions, spec)
     fit, weights = chosen.fit, chosen.weights
     normals, valid, deviation = _normals(chosen.scene, y, positions, fit, spec)
     return Calibration(
@@ -205,7 +230,24 @@ def calibrate(scene: Scene, captures: Sequence[Capture], spec: LoopSpec) -> Cali
         },
         residual_rms=float(np.sqrt(fit.cost / max(int(weights.sum()), 1))),
         specular=chosen.specular,
+        lamp=lamp,
     )
+
+
+def _photometric_fit(
+    scene: Scene, y: Array, positions: Array, spec: LoopSpec
+) -> tuple[Literal["directional", "point"], _RobustFit, dict[str, float]]:
+    """Steps 2–5 for lights at ``positions`` (K, 3): the light model kept, its fit, and each model's
+    recorded-value residual on the entries both fits used."""
+    s = scene.light.saturation
+    fits = {m: _robust_fit(_with_light_model(scene, m), y, positions, spec) for m in LIGHT_MODELS}
+    both = np.logical_and.reduce([f.weights for f in fits.values()])
+    residual: dict[str, float] = {
+        m: float(np.sqrt(np.mean((y - respond(f.fit.prediction, s, f.fit.gamma))[both] ** 2))) if both.any() else np.inf
+        for m, f in fits.items()
+    }
+    model = min(LIGHT_MODELS, key=lambda m: (residual[m], m != scene.light.model))
+    return model, fits[model], residual
 
 
 def _with_light_model(scene: Scene, model: Literal["directional", "point"]) -> Scene:
@@ -373,9 +415,20 @@ def _normals(
     return normals, valid, deviation
 
 
+def lamp_robot(robot: RobotSpec, lamp: LampCalibration) -> RobotSpec:
+    """``[robot]`` with its light frame moved to the calibrated lamp: flange · T(o, R_o) · T(δ) =
+    flange · T(o + R_o δ, R_o), o = ``light_offset_m``, R_o from ``light_rpy_deg``."""
+    r, p, y = np.deg2rad(robot.light_rpy_deg)
+    rotation = np.asarray(pin.rpy.rpyToMatrix(r, p, y), float)
+    offset = np.asarray(robot.light_offset_m, float) + rotation @ lamp.offset_m
+    return dataclasses.replace(robot, light_offset_m=(float(offset[0]), float(offset[1]), float(offset[2])))
+
+
 def calibrated_setup(setup: Setup, calibration: Calibration, normals: str = "model") -> Setup:
     """``setup`` with its scenes and objectives on the calibrated model: the calibrated light, the
-    albedo ρ·c, the response γ, and (``normals = "photometric_stereo"``) the recovered normals. The
+    albedo ρ·c, the response γ, (``normals = "photometric_stereo"``) the recovered normals, and the
+    robot's light frame on the calibrated lamp (:func:`lamp_robot`; the planner's IK then puts the
+    estimated real lamp on the landmarks, the same joints, limits and start). The
     search scene takes each pixel's values from the camera pixel its point projects to (the model's
     where that pixel is not calibrated). The objectives keep their references and terms: the target
     stays what the problem says a good image is; only the model that predicts the images changes."""
@@ -404,9 +457,18 @@ def calibrated_setup(setup: Setup, calibration: Calibration, normals: str = "mod
     cal_search_objective = cal_objective if setup.search_objective is setup.objective else objective(
         setup.search_objective, cal_search
     )
+    problem = dataclasses.replace(setup.problem, light=light)
+    robot, dynamics = setup.robot, setup.dynamics
+    lamp = calibration.lamp
+    if lamp is not None and np.any(lamp.offset_m != 0.0):
+        problem = dataclasses.replace(problem, robot=lamp_robot(problem.robot, lamp))
+        robot = load_robot(problem)
+        dynamics = Dynamics(robot, lamp_of(problem))
     return dataclasses.replace(
         setup,
-        problem=dataclasses.replace(setup.problem, light=light),
+        problem=problem,
+        robot=robot,
+        dynamics=dynamics,
         scene=cal_scene,
         search_scene=cal_search,
         objective=cal_objective,

@@ -110,7 +110,7 @@ class FolderCamera:
             )
         return path
 
-    def capture(self, light_position: ArrayLike, index: int = 0) -> Capture:
+    def capture(self, light_position: ArrayLike, index: int = 0, light_rotation: ArrayLike | None = None) -> Capture:
         """The image of the row nearest to ``light_position``, linearised; :class:`MissingCaptureError`
         when no row is within ``tolerance_m``."""
         a = np.asarray(light_position, float)
@@ -129,7 +129,9 @@ class FolderCamera:
             "saturation": self.saturation,
             "linearised_gamma": self.response_gamma,
         }
-        return Capture(linearise(recorded * self.saturation, self.saturation, self.response_gamma), a, index, exposure)
+        linear = linearise(recorded * self.saturation, self.saturation, self.response_gamma)
+        rotation = None if light_rotation is None else np.asarray(light_rotation, float).reshape(3, 3)
+        return Capture(linear, a, index, exposure, rotation)
 
 
 def read_captures_csv(path: Path) -> tuple[list[str], NDArray[np.float64]]:

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from optlight.capture import Array, Capture, world_albedo, world_light
+from optlight.capture import Array, Capture, real_lamp, world_albedo, world_light
 from optlight.errors import OptlightError, ProblemError
 from optlight.scene import Scene
 from optlight.scene.response import respond
@@ -192,8 +192,9 @@ class MitsubaCamera:
             shape.add_attribute("vertex_weight", 1, vector((albedo / top).astype(np.float32)))
         return shape
 
-    def _emitter(self, real: Array) -> dict[str, Any]:
-        """The light at ``real`` (a', world, m) per the module docstring."""
+    def _emitter(self, real: Array, axis: Array | None = None) -> dict[str, Any]:
+        """The light at ``real`` (a', world, m) per the module docstring, a disk or spot facing along
+        ``axis`` (the real lamp's, world; None: facing O)."""
         mi, w = self.mi, self.world
         center, radius = self.scene.sphere.center, self.scene.sphere.radius
         intensity = np.pi * self.light.power * radius**2
@@ -205,9 +206,10 @@ class MitsubaCamera:
                     "irradiance": {"type": "uniform", "value": np.pi * self.light.power},
                 }
             return {"type": "point", "position": real.tolist(), "intensity": {"type": "uniform", "value": intensity}}
-        axis = center - real
+        axis = center - real if axis is None else axis
         up = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.99 * np.linalg.norm(axis) else np.array([1.0, 0.0, 0.0])
-        aim = mi.ScalarTransform4f().look_at(origin=real.tolist(), target=center.tolist(), up=up.tolist())
+        target = real + axis / np.linalg.norm(axis)
+        aim = mi.ScalarTransform4f().look_at(origin=real.tolist(), target=target.tolist(), up=up.tolist())
         if w.light_profile == "spot":
             return {
                 "type": "spot",
@@ -247,18 +249,19 @@ class MitsubaCamera:
                 self._ambient = np.zeros((self.scene.camera.height, self.scene.camera.width))
         return self._ambient
 
-    def render_linear(self, light_position: ArrayLike, seed: int = 0) -> Array:
-        """The linear image g·(L_light + L_ambient) (H, W) with the robot's light at ``light_position``
-        (the real one at a + δ), before noise, clip and response."""
-        real = np.asarray(light_position, float) + np.asarray(self.world.light_offset_m, float)
-        direct = self._render(self._emitter(real), self.world.spp, seed)
+    def render_linear(self, light_position: ArrayLike, seed: int = 0, light_rotation: ArrayLike | None = None) -> Array:
+        """The linear image g·(L_light + L_ambient) (H, W) with the robot's nominal light frame at
+        ``light_position`` and ``light_rotation`` (the real lamp where :func:`real_lamp` puts it),
+        before noise, clip and response."""
+        real, axis = real_lamp(light_position, light_rotation, self.world)
+        direct = self._render(self._emitter(real, axis), self.world.spp, seed)
         return self.light.gain * (direct + self.ambient_radiance())
 
-    def capture(self, light_position: ArrayLike, index: int = 0) -> Capture:
+    def capture(self, light_position: ArrayLike, index: int = 0, light_rotation: ArrayLike | None = None) -> Capture:
         """Render (:meth:`render_linear`), add noise, clip and apply the response."""
         seed = self.world.seed + self._count
         self._count += 1
-        linear = self.render_linear(light_position, seed)
+        linear = self.render_linear(light_position, seed, light_rotation)
         if self.world.noise_std > 0:
             linear = linear + self._rng.normal(0.0, self.world.noise_std, linear.shape)
         s = self.light.saturation
@@ -271,5 +274,6 @@ class MitsubaCamera:
             "saturation": s,
             "linearised_gamma": 1.0,
         }
-        return Capture(respond(linear, s, self.world.gamma), np.asarray(light_position, float), index, exposure)
+        rotation = None if light_rotation is None else np.asarray(light_rotation, float).reshape(3, 3)
+        return Capture(respond(linear, s, self.world.gamma), np.asarray(light_position, float), index, exposure, rotation)
 

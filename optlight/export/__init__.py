@@ -47,7 +47,12 @@ dwell's start plus ``settle_s``), the image file name (the same as in lights.lp)
 and azimuth on the light sphere (degrees, the angles ``optlight render --zenith --azimuth`` takes:
 zenith from the direction towards the camera, azimuth 0 to the image's right and 90 towards its
 top), the light direction in the frame of lights.lp (columns ``light_dir_right``, ``light_dir_up``,
-``light_dir_to_camera``), the light position in the world and the joint angles at the trigger.
+``light_dir_to_camera``), the light position in the world, the joint angles at the trigger and, from a
+plan, the exposure (``exposure_start_s``, ``exposure_end_s``) and the blur the trajectory gives it
+(``blur_deg``: the angle the light turns about the object's centre, ``blur_mm``: the distance it
+travels; measured by :func:`optlight.verify.exposure_blur`). Flying captures
+(``[trajectory] capture = "flying"``) have a dwell of zero length: the trigger is the instant the
+light is at the landmark, the exposure centred on it; after a stop the exposure starts at the trigger.
 
 Light directions: one frame for every file that holds them (captures.csv, lights.lp and the DiLiGenT
 folder's ``light_directions.txt``): the unit vector from the object towards the light, x to the
@@ -55,6 +60,7 @@ right of the image, y towards its top, z towards the camera (:data:`LIGHT_FRAME`
 """
 
 from optlight.export.files import (
+    EXPOSURE_COLUMNS,
     FOLLOW_JOINT_TRAJECTORY_GOAL,
     GOAL_TIME_TOLERANCE_S,
     JOINT_TRAJECTORY,
@@ -86,6 +92,7 @@ __all__ = [
     "GOAL_TIME_TOLERANCE_S",
     "JOINT_TRAJECTORY",
     "LIBRARIES",
+    "EXPOSURE_COLUMNS",
     "LIGHT_DIRECTION_COLUMNS",
     "LIGHT_FRAME",
     "MANIFEST",

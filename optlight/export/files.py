@@ -33,6 +33,9 @@ LIGHT_FRAME = (
 )
 #: captures.csv's columns of the light direction, in :data:`LIGHT_FRAME`.
 LIGHT_DIRECTION_COLUMNS = ("light_dir_right", "light_dir_up", "light_dir_to_camera")
+#: captures.csv's last columns: the exposure's start and end (s) and the light's motion during it
+#: (the angle it turns about the object's centre, deg, and the distance it travels, mm).
+EXPOSURE_COLUMNS = ("exposure_start_s", "exposure_end_s", "blur_deg", "blur_mm")
 
 
 def lp_direction(d_camera: ArrayLike) -> Array:
@@ -189,11 +192,15 @@ def write_captures(
     light_positions: ArrayLike,
     light_angles_deg: ArrayLike,
     joint_names: Sequence[str],
+    exposures: tuple[ArrayLike, ArrayLike, ArrayLike] | None = None,
 ) -> Path:
     """Write captures.csv (module docstring): one row per dwell of ``trajectory``; the trigger is the
-    dwell's start plus ``settle_s`` (0 ≤ settle_s < each dwell's length), the joint angles are the
+    dwell's start plus ``settle_s`` (0 ≤ settle_s < each dwell's length), or the instant of a dwell of
+    zero length (a flying capture, :meth:`Trajectory.trigger_times`), the joint angles are the
     trajectory's at the trigger. Per capture: the direction (unit, OpenCV camera frame; written in
-    :data:`LIGHT_FRAME`), the position (m, world) and the (zenith, azimuth) in degrees."""
+    :data:`LIGHT_FRAME`), the position (m, world) and the (zenith, azimuth) in degrees; with
+    ``exposures`` = (windows (M, 2) s, blur angles (M,) rad, blur distances (M,) m), the exposure's
+    start and end and the blur (deg, mm) as the last four columns."""
     intervals = trajectory.landmark_intervals
     m = intervals.shape[0]
     directions = lp_direction(np.asarray(light_directions_camera, float).reshape(-1, 3))
@@ -201,17 +208,22 @@ def write_captures(
     angles = np.asarray(light_angles_deg, float).reshape(-1, 2)
     if directions.shape[0] != m or positions.shape[0] != m or angles.shape[0] != m:
         raise ValueError(f"expected {m} light directions, positions and angles, one per capture")
-    lengths = intervals[:, 1] - intervals[:, 0]
-    if not (settle_s >= 0 and np.all(settle_s < lengths)):
-        raise ValueError(f"settle_s = {settle_s} s must be ≥ 0 and shorter than every dwell ({lengths.min():.6g} s)")
+    trigger = trajectory.trigger_times(settle_s)
     names = image_names(image_pattern, m)
-    trigger = intervals[:, 0] + settle_s
     q = trajectory.sample(trigger)[0] if m else np.zeros((0, len(joint_names)))
+    extra = np.zeros((m, 0))
+    if exposures is not None:
+        windows = np.asarray(exposures[0], float).reshape(-1, 2)
+        blur = np.column_stack([np.rad2deg(exposures[1]), 1e3 * np.asarray(exposures[2], float)]).reshape(-1, 2)
+        if windows.shape[0] != m or blur.shape[0] != m:
+            raise ValueError(f"expected {m} exposure windows and blurs, one per capture")
+        extra = np.column_stack([windows, blur])
     header = (
         ["capture", "dwell_start_s", "dwell_end_s", "trigger_s", "image", "zenith_deg", "azimuth_deg"]
         + list(LIGHT_DIRECTION_COLUMNS)
         + [f"light_position_{a}_m" for a in "xyz"]
         + [f"q_{n}" for n in joint_names]
+        + (list(EXPOSURE_COLUMNS) if exposures is not None else [])
     )
     out = Path(path)
     with out.open("w", newline="") as f:
@@ -221,6 +233,8 @@ def write_captures(
             writer.writerow(
                 [i, *(f"{x:.9f}" for x in (*intervals[i], trigger[i])), names[i]]
                 + [f"{x:.12g}" for x in (*angles[i], *directions[i], *positions[i], *q[i])]
+                + [f"{x:.9f}" for x in extra[i, :2]]
+                + [f"{x:.6g}" for x in extra[i, 2:]]
             )
     return out
 

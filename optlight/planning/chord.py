@@ -45,14 +45,14 @@ def chord_path(
     w = np.array(kept)
     if position_bounds is not None:
         w = _within_bounds(w, *position_bounds)
-    return _chord(w), w
+    return chord_parameter(w), w
 
 
 def _within_bounds(w: Array, lower: Array, upper: Array) -> Array:
     """The waypoints ``w`` (K, n) with the chord midpoints :func:`chord_path` adds where the spline
     through them leaves [``lower``, ``upper``]."""
     for _ in range(MAX_BULGE_REFINEMENTS):
-        low, high = spline_position_range(_chord(w), w)
+        low, high = spline_position_range(chord_parameter(w), w)
         outside = np.flatnonzero(((low < lower) | (high > upper)).any(axis=1))
         if outside.size == 0:
             break
@@ -60,7 +60,7 @@ def _within_bounds(w: Array, lower: Array, upper: Array) -> Array:
     return w
 
 
-def _chord(w: Array) -> Array:
+def chord_parameter(w: Array) -> Array:
     """The cumulative chord parameter (K,) of waypoints (K, n): s_0 = 0, s_k = s_{k−1} + |q_k − q_{k−1}|₂."""
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(w, axis=0), axis=1))])
 

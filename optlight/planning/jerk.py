@@ -133,6 +133,38 @@ def rest_to_rest_moves(
     return out
 
 
+def nonstop_bound(postures: ArrayLike, velocity_limit: ArrayLike, acceleration_limit: ArrayLike) -> float:
+    """A lower bound (s) on the time of any motion through the postures (P, n) (rad) in their order,
+    from rest at the first to rest at the last, whatever its path and its speeds at the postures in
+    between, under |q̇_j| ≤ v_j and |q̈_j| ≤ a_j: the larger of
+
+    - Σ_k max_j |q_{k+1,j} − q_{k,j}| / v_j: no joint moves faster than its limit on any move;
+    - max_j Σ_r T_j(D_r): where the sequence of joint j's positions turns, the joint reaches an
+      extremum at least as far, with zero velocity, so its motion holds rest-to-rest moves over at
+      least the distances D_r between consecutive turns (the first and last posture included), one
+      after the other, each taking at least T_j(D) = D/v_j + v_j/a_j when D ≥ v_j²/a_j, else 2√(D/a_j)
+      (bang-bang; the jerk limit is left out, since at a turn the acceleration need not be zero).
+    """
+    q = np.asarray(postures, float)
+    if q.ndim != 2 or q.shape[0] < 1:
+        raise ValueError(f"postures must be a (P, n) array, got shape {q.shape}")
+    vmax = positive_limits(velocity_limit, q.shape[1], "velocity_limit")
+    amax = positive_limits(acceleration_limit, q.shape[1], "acceleration_limit")
+    steps = np.diff(q, axis=0)
+    cruise = float(np.sum(np.max(np.abs(steps) / vmax, axis=1, initial=0.0)))
+    stops = 0.0
+    for j in range(q.shape[1]):
+        d = steps[:, j][steps[:, j] != 0.0]
+        if d.size == 0:
+            continue
+        run = np.concatenate([[0], np.cumsum(np.sign(d[1:]) != np.sign(d[:-1]))])  # run index per step
+        distance = np.abs(np.bincount(run, weights=d))
+        v, a = vmax[j], amax[j]
+        time = np.where(distance >= v * v / a, distance / v + v / a, 2.0 * np.sqrt(distance / a))
+        stops = max(stops, float(time.sum()))
+    return max(cruise, stops)
+
+
 def path_bounds(
     maxima: tuple[Array, Array, Array], length: float, vmax: Array, amax: Array, jmax: Array
 ) -> tuple[float, float, float]:
@@ -169,9 +201,19 @@ def path_bounds(
 class JerkLimitedMotion:
     """One segment: the path q(s) (cubic spline, s ∈ [0, L]) and ruckig's profile s(t), evaluated
     vectorised from the profile's seven phases (duration t_k, jerk j_k, and s, ṡ, s̈ at each phase start):
-    on phase k, with τ the time since its start, s = p_k + v_k τ + a_k τ²/2 + j_k τ³/6."""
+    on phase k, with τ the time since its start, s = p_k + v_k τ + a_k τ²/2 + j_k τ³/6.
 
-    def __init__(self, path: CubicSpline, bounds: tuple[float, float, float], index: int) -> None:
+    The profile starts and ends with s̈ = 0 and path speeds ṡ = ``speeds`` (0 ≤ each ≤ V; rest to rest
+    by default), never moving backwards (ṡ ≥ 0; ruckig fails when the distance is too short to change
+    from one speed to the other without reversing)."""
+
+    def __init__(
+        self,
+        path: CubicSpline,
+        bounds: tuple[float, float, float],
+        index: int,
+        speeds: tuple[float, float] = (0.0, 0.0),
+    ) -> None:
         self.path = path
         self.length = float(path.x[-1])
         self.bounds = bounds
@@ -179,13 +221,18 @@ class JerkLimitedMotion:
         v, a, j = bounds
         otg = ruckig.Ruckig(1)
         inp = ruckig.InputParameter(1)
-        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [0.0], [0.0]
-        inp.target_position, inp.target_velocity, inp.target_acceleration = [self.length], [0.0], [0.0]
+        inp.current_position, inp.current_velocity, inp.current_acceleration = [0.0], [speeds[0]], [0.0]
+        inp.target_position, inp.target_velocity, inp.target_acceleration = [self.length], [speeds[1]], [0.0]
         inp.max_velocity, inp.max_acceleration, inp.max_jerk = [v], [a], [j]
+        if any(speeds):
+            inp.min_velocity = [0.0]
         reference = ruckig.Trajectory(1)
         result = otg.calculate(inp, reference)
         if result not in (ruckig.Result.Working, ruckig.Result.Finished):
-            raise SolverError(f"segment {index}: ruckig returned {result} for bounds V={v}, A={a}, J={j}")
+            raise SolverError(
+                f"segment {index}: ruckig returned {result} for bounds V={v}, A={a}, J={j}, "
+                f"path speeds {speeds[0]:.6g} → {speeds[1]:.6g}"
+            )
         self.reference: ruckig.Trajectory | None = reference  # ruckig's own, which the tests compare
         profile = reference.profiles[0][0]
         if profile.brake.duration > 0 or profile.accel.duration > 0:

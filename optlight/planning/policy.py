@@ -31,12 +31,13 @@ from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK
 from optlight.errors import IPOPT_ITERATION_LIMIT, OutOfReachError
+from optlight.planning.jerk import rest_to_rest_duration
 from optlight.planning.landmarks import Landmark, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
 from optlight.planning.placement import ClearPosture, LightPlacement
 from optlight.robot import IKResult, Robot, generalized_ik
 from optlight.spec import LandmarksSpec, SolverSpec, TrajectorySpec
-from optlight.workcell import ImageCosts, Workcell
+from optlight.workcell import ImageCosts, MotionLimits, Workcell
 
 Array = NDArray[np.float64]
 
@@ -331,12 +332,24 @@ def _follow_back(reacher: Reacher, landmarks: Sequence[Landmark], thetas: Array)
     return thetas
 
 
-def visiting_order(spec: TrajectorySpec, placement: LandmarkPlacement) -> NDArray[np.int64]:
-    """Azimuth order, or a short open tour in joint space (``spec.order``, ``[trajectory] order``)."""
+def visiting_order(spec: TrajectorySpec, limits: MotionLimits, placement: LandmarkPlacement) -> NDArray[np.int64]:
+    """Azimuth order, or a short open tour on :func:`tour_costs` (``spec.order``, ``[trajectory] order``)."""
     if spec.order == "tour":
-        thetas = placement.thetas
-        return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
+        return shortest_open_tour(tour_costs(spec, limits, placement.thetas))
     return azimuth_order([lm.azimuth for lm in placement.landmarks])
+
+
+def tour_costs(spec: TrajectorySpec, limits: MotionLimits, thetas: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(M, M) what a capture tour through the postures ``thetas`` (M, n) minimises between two of them:
+    the joint-space distance |θ_a − θ_b|₂ (rad) when the robot stops at each capture; with flying
+    captures (``[trajectory] capture``) the time (s) of the move, estimated as the slowest joint's
+    time-optimal rest-to-rest move under the velocity, acceleration and jerk limits
+    (:func:`~optlight.planning.jerk.rest_to_rest_duration`): a flying acquisition spends time, and a
+    joint far from its limits costs less than its share of the distance."""
+    step = np.abs(thetas[:, None, :] - thetas[None, :, :])
+    if spec.capture != "flying":
+        return np.linalg.norm(step, axis=2)
+    return rest_to_rest_duration(step, limits.velocity, limits.acceleration, limits.jerk).max(axis=2)
 
 
 def knot_ik(cell: Workcell, path: LightPath, landmark_thetas: Array) -> tuple[Array, NDArray[np.int64]]:

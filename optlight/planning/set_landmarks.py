@@ -280,9 +280,13 @@ def directions_of(sphere: LightSphere, landmarks: Sequence[Landmark]) -> Array:
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
-def tour_order(thetas: Array) -> NDArray[np.int64]:
-    """A short open tour through the joint configurations ``thetas`` (M, n): the capture order of a set."""
-    return shortest_open_tour(np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2))
+def tour_order(thetas: Array, costs: Array | None = None) -> NDArray[np.int64]:
+    """A short open tour through the joint configurations ``thetas`` (M, n): the capture order of a set,
+    on the (M, M) ``costs`` between them (:func:`~optlight.planning.policy.tour_costs`; default the
+    joint-space distance)."""
+    if costs is None:
+        costs = np.linalg.norm(thetas[:, None, :] - thetas[None, :, :], axis=2)
+    return shortest_open_tour(costs)
 
 
 def joint_distance(thetas: Array, order: ArrayLike) -> float:

@@ -109,7 +109,8 @@ def _check_robot(p: Problem, file: str) -> None:
 
 
 def _check_trajectory(p: Problem, file: str) -> None:
-    """Image names that are distinct file names, a settle time shorter than the dwell."""
+    """Image names that are distinct file names, flying captures timed jerk-limited, a settle time
+    shorter than the dwell and, when stopping, an exposure within the dwell."""
     try:
         image_names(p.trajectory.image_pattern, p.landmarks.count)
     except ValueError as e:
@@ -120,12 +121,26 @@ def _check_trajectory(p: Problem, file: str) -> None:
             p.trajectory.image_pattern,
         ) from None
     traj = p.trajectory
+    if traj.capture == "flying" and traj.timing != "jerk_limited":
+        raise ProblemError(
+            file,
+            "trajectory.capture",
+            f'"stop" with trajectory.timing = "{traj.timing}" (flying captures are timed jerk-limited)',
+            traj.capture,
+        )
     if traj.settle_s >= traj.dwell_s:
         raise ProblemError(
             file,
             "trajectory.settle_s",
             f"a settle time shorter than the dwell (trajectory.dwell_s = {traj.dwell_s:g} s)",
             traj.settle_s,
+        )
+    if traj.capture == "stop" and traj.settle_s + traj.exposure_s > traj.dwell_s:
+        raise ProblemError(
+            file,
+            "trajectory.exposure_s",
+            f"an exposure that ends within the dwell (≤ dwell_s − settle_s = {traj.dwell_s - traj.settle_s:g} s)",
+            traj.exposure_s,
         )
 
 
@@ -185,6 +200,14 @@ def _check_world(p: Problem, file: str) -> None:
             f"an offset shorter than the light sphere's radius ({offset:.3g} m ≥ {ls.radius_m:g} m puts "
             "the real light anywhere, even behind the object)",
             list(p.world.light_offset_m),
+        )
+    lamp = float(np.linalg.norm(p.world.lamp_offset_m))
+    if lamp >= ls.radius_m:
+        raise ProblemError(
+            file,
+            "world.lamp_offset_m",
+            f"an offset shorter than the light sphere's radius ({lamp:.3g} m ≥ {ls.radius_m:g} m)",
+            list(p.world.lamp_offset_m),
         )
     if p.world.noise_std > light.saturation:
         raise ProblemError(

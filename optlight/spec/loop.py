@@ -39,9 +39,23 @@ class WorldSpec:
     )
     light_offset_m: Vec3 = key(
         (0.0, 0.0, 0.0),
-        "where the real light is, relative to where the robot puts it (world frame); shorter than the light "
+        "where the real light is, relative to where the robot puts it, in the world frame (it does not turn "
+        "with the flange: a misplaced model; a lamp mounted off its pose is lamp_offset_m); shorter than the "
+        "light sphere's radius",
+        unit="m",
+    )
+    lamp_offset_m: Vec3 = key(
+        (0.0, 0.0, 0.0),
+        "where the real lamp is on the flange: its offset from the nominal light frame ([robot] light_offset_m, "
+        "light_rpy_deg), in that frame, so it turns with the arm as a real mount does; shorter than the light "
         "sphere's radius",
         unit="m",
+    )
+    lamp_rpy_deg: Vec3 = key(
+        (0.0, 0.0, 0.0),
+        "the real lamp's roll, pitch, yaw in the nominal light frame (roll and pitch tilt its axis, which the "
+        "physically based camera's lambertian and spot profiles follow)",
+        unit="deg",
     )
     light_radius_m: float = key(
         0.0, "radius of the real light's emitting area (0: a point; the physically based camera)", unit="m", lo=0.0
@@ -104,6 +118,11 @@ class LoopSpec:
     specular_mad: float = key(
         3.0, "pixels brighter than the fit by more than this many robust deviations (MAD) count as specular", lo=0.0,
         lo_open=True,
+    )
+    lamp: Literal["calibrate", "nominal"] = key(
+        "calibrate",
+        "estimate the lamp's pose on the flange (its offset and axis tilt in the light frame) from the captures "
+        "and re-plan with it, or keep the nominal light frame",
     )
     servo_steps: int = key(8, "captures of the local photometric servo", lo=1, hi=1000)
     servo_step_deg: float = key(

@@ -170,7 +170,7 @@ def check_trajectory_size(
 ) -> None:
     """Raise :class:`ProblemError` when the sampled trajectory cannot fit in this machine's memory
     (:func:`trajectory_samples_budget`), by a lower estimate of its duration made before any work:
-    ``captures`` dwells of ``dwell_s`` and ``captures − 1`` moves between captures at least
+    ``captures`` dwells of ``dwell_s`` (none with flying captures) and ``captures − 1`` moves between captures at least
     ``[landmarks] distinct_deg`` apart on the light sphere, each at least :func:`least_move_time`
     under the robot's limits (``velocity`` already scaled by ``velocity_scale``). The refusal names the
     key that makes the trajectory too long (``rate_hz``, ``dwell_s`` or a motion limit) and the
@@ -185,7 +185,7 @@ def check_trajectory_size(
     jerk_used = jerk if traj.timing == "jerk_limited" else None
     move, limit = least_move_time(distance, reach_m, velocity, acceleration, jerk_used)
     moves = max(captures - 1, 0)
-    dwell = captures * traj.dwell_s
+    dwell = captures * traj.dwell_s if traj.capture == "stop" else 0.0  # flying captures: no dwell
     duration = dwell + moves * move
     if duration * rate <= budget:
         return

@@ -50,6 +50,37 @@ class TrajectorySpec:
         lo=0.0,
     )
     return_home: bool = key(True, "end the plan back at the start configuration ([robot] start)")
+    capture: Literal["stop", "flying"] = key(
+        "stop",
+        "stop for dwell_s at each landmark and trigger settle_s into the dwell, or pass through every "
+        "landmark without stopping, slow enough for blur_deg and blur_mm, triggering when the light is there "
+        "(flying needs timing = \"jerk_limited\")",
+    )
+    exposure_s: float = key(
+        0.005,
+        "the camera's exposure time: it starts at the trigger after a stop and is centred on it on the fly "
+        "(captures.csv gives each exposure's start and end)",
+        unit="s",
+        lo=0.0,
+        lo_open=True,
+        hi=1.0,
+    )
+    blur_deg: float = key(
+        0.2,
+        "largest angle the light may turn about the object's centre during an exposure (flying captures)",
+        unit="deg",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+    )
+    blur_mm: float = key(
+        2.0,
+        "largest distance the light may travel during an exposure (flying captures)",
+        unit="mm",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+    )
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,10 @@ dwell/motion boundary (and just before each), every capture time, and then:
   ``torque``: |τ_j| ≤ τ_max,j at every sample, τ = M(q) q̈ + C(q, q̇) q̇ + g(q) by inverse dynamics
   (pinocchio's RNEA), τ_max the robot's published torque limits; a robot without them has its peak
   torques reported (:attr:`VerificationReport.torques`) and the check skipped;
+- with the camera's exposure (:class:`optlight.motion.Exposure`, the windows of the captures'
+  exposures): ``blur_angle`` and ``blur_distance``, the angle (rad) the light turns about the sphere's
+  centre and the distance (m) it travels during each exposure, measured on 65 samples of the window
+  (:func:`exposure_blur`), against the exposure's blur tolerances;
 - with a view check (:class:`optlight.environment.view.ViewCheck`, exact ray casting at the captures):
   ``view`` (camera rays to the object blocked by a robot link or the light housing) and ``beam``
   (light rays to the object blocked by a robot link), each the largest blocked fraction of a
@@ -46,6 +50,7 @@ quantity) at its worst sample; the report keeps the first :data:`MAX_EPISODES` p
 failing samples, and the worst value of every check.
 """
 
+from optlight.verify.blur import capture_exposures, exposure_blur
 from optlight.verify.checks import verify_trajectory
 from optlight.verify.environment import ENVIRONMENT_CHECKS, EnvironmentCheck, ViewCheck
 from optlight.verify.interpolation import quintic_hermite
@@ -70,8 +75,10 @@ __all__ = [
     "VerificationReport",
     "ViewCheck",
     "Violation",
+    "capture_exposures",
     "distance_to_polyline",
     "ensure_verified",
+    "exposure_blur",
     "quintic_hermite",
     "verify_trajectory",
 ]

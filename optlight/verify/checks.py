@@ -10,7 +10,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from optlight.geometry import LightSphere
-from optlight.motion import Trajectory
+from optlight.motion import Exposure, Trajectory
+from optlight.verify.blur import blur_checks
 from optlight.verify.collector import Collector
 from optlight.verify.environment import EnvironmentCheck, ViewCheck, environment_checks, view_checks
 from optlight.verify.interpolation import ControllerPoints, interpolation_check
@@ -39,6 +40,8 @@ def verify_trajectory(
     view: ViewCheck | None = None,
     waypoints: ControllerPoints | None = None,
     dynamics: TorqueModel | None = None,
+    exposure: Exposure | None = None,
+    exposure_windows: ArrayLike | None = None,
     advisory: tuple[str, ...] = (),
     rate_hz: float = 1000.0,
     tol: Tolerances = Tolerances(),  # noqa: B008 - frozen, immutable default
@@ -65,6 +68,10 @@ def verify_trajectory(
             or None to skip the ``interpolation`` check.
         dynamics: the joint torques of the motion and their limits, or None to skip the ``torque``
             check.
+        exposure: the camera's exposure and blur tolerances, or None to skip the ``blur_angle`` and
+            ``blur_distance`` checks.
+        exposure_windows: (M, 2) start and end (s) of each capture's exposure
+            (:meth:`Trajectory.exposure_windows`); None: centred on the capture times.
         advisory: names of checks reported without deciding the verdict.
         rate_hz: resampling rate, at least 1000 Hz; also the controller grid of the continuity check.
         tol: the tolerances.
@@ -88,6 +95,15 @@ def verify_trajectory(
         torques = torque_check(collector, dynamics, q, qd, qdd, collector.names)
     if torques is None or torques.limit_nm is None:
         skipped += ("torque",)
+    if exposure is not None:
+        windows = (
+            trajectory.capture_times[:, None] + exposure.seconds * np.array([-0.5, 0.5])
+            if exposure_windows is None
+            else exposure_windows
+        )
+        blur_checks(collector, trajectory, np.clip(windows, 0.0, trajectory.duration), exposure, light_pose, sphere.center)
+    else:
+        skipped += ("blur_angle", "blur_distance")
     skipped += _surroundings_checks(collector, trajectory, q, environment, view)
 
     return VerificationReport(

@@ -91,6 +91,8 @@ MILLION_ROWS = {
 PROBLEMS: dict[str, dict] = {
     "small": small(),
     "dwell": small(trajectory={"dwell_s": 1e6, "settle_s": 0.2}),
+    "flying_toppra": small(trajectory={"capture": "flying", "timing": "toppra"}),
+    "exposure_past_dwell": small(trajectory={"exposure_s": 0.35}),
     "acceleration": small(robot={"acceleration_limit": 1e-9}),
     "ik_iterations": small(robot=FAR_BASE, solver={"ik_max_iter": 1_000_000_000}),
     "solver_iterations": small(solver={"max_iter": 1_000_000_000}),
@@ -123,6 +125,20 @@ ROWS: list[tuple[str, list[str], str, list[str]]] = [
         "dwell of a million seconds",
         ["check", "{dwell}"],
         r"{dwell}: trajectory\.dwell_s: expected a value ≤ [0-9.e+]+ s on this machine: .* got 1000000\.0$",
+        [],
+    ),
+    (
+        "flying captures timed by TOPPRA",
+        ["solve", "{flying_toppra}", "--out", "out_flying"],
+        r"{flying_toppra}: trajectory\.capture: expected \"stop\" with trajectory\.timing = \"toppra\" "
+        r"\(flying captures are timed jerk-limited\), got 'flying'$",
+        ["out_flying"],
+    ),
+    (
+        "an exposure longer than the dwell after the settle time",
+        ["check", "{exposure_past_dwell}"],
+        r"{exposure_past_dwell}: trajectory\.exposure_s: expected an exposure that ends within the dwell "
+        r"\(≤ dwell_s − settle_s = 0\.3 s\), got 0\.35$",
         [],
     ),
     (

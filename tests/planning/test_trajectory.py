@@ -303,11 +303,11 @@ def test_a_failed_solve_is_tried_again_from_a_small_barrier(small_setup: Setup, 
     real = trajectory.TrajectoryOptimizer.solve
     barriers, expects, budgets = [], [], []
 
-    def fails_from_the_default_barrier(self, path_, sphere, theta0, fixed_start=False):
+    def fails_from_the_default_barrier(self, path_, sphere, theta0, fixed_start=False, fixed_end=False):
         barriers.append(self.options.get("ipopt.mu_init"))
         expects.append(self.options.get("ipopt.expect_infeasible_problem"))
         budgets.append(self.options["ipopt.max_iter"])
-        result = real(self, path_, sphere, theta0, fixed_start)
+        result = real(self, path_, sphere, theta0, fixed_start, fixed_end)
         return result if barriers[-1] is not None else replace(result, success=False, status="Infeasible_Problem_Detected")
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails_from_the_default_barrier)
@@ -329,10 +329,10 @@ def _failing_tries(monkeypatch) -> tuple[list, list]:
     barriers: list = []
     budgets: list = []
 
-    def fails(self, path_, sphere, theta0, fixed_start=False):
+    def fails(self, path_, sphere, theta0, fixed_start=False, fixed_end=False):
         barriers.append(self.options.get("ipopt.mu_init"))
         budgets.append(self.options["ipopt.max_iter"])
-        return replace(real(self, path_, sphere, theta0, fixed_start), success=False, status="Infeasible_Problem_Detected")
+        return replace(real(self, path_, sphere, theta0, fixed_start, fixed_end), success=False, status="Infeasible_Problem_Detected")
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", fails)
     return barriers, budgets
@@ -390,8 +390,8 @@ def test_the_first_try_stops_at_its_budget_and_the_retry_solves(small_setup: Set
     real = trajectory.TrajectoryOptimizer.solve
     tries = []
 
-    def recorded(self, path_, sphere, theta0, fixed_start=False):
-        tries.append(real(self, path_, sphere, theta0, fixed_start))
+    def recorded(self, path_, sphere, theta0, fixed_start=False, fixed_end=False):
+        tries.append(real(self, path_, sphere, theta0, fixed_start, fixed_end))
         return tries[-1]
 
     monkeypatch.setattr(trajectory.TrajectoryOptimizer, "solve", recorded)

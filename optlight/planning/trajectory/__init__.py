@@ -24,7 +24,8 @@ The per-knot constraints are one SX function mapped over the knots, so the graph
 Modules: :mod:`~optlight.planning.trajectory.optimizer` (the NLP, built once),
 :mod:`~optlight.planning.trajectory.knots` (solving it over a path, with its retry),
 :mod:`~optlight.planning.trajectory.active_rows` (the clearance rows that join),
-:mod:`~optlight.planning.trajectory.transfer` (the transfer NLP) and
+:mod:`~optlight.planning.trajectory.transfer` (the transfer NLP),
+:mod:`~optlight.planning.trajectory.between` (knots added where the arm comes too close between two) and
 :mod:`~optlight.planning.trajectory.following` (knots added to follow the planned path). This
 package re-exports their public names.
 """
@@ -37,6 +38,13 @@ from optlight.planning.trajectory.active_rows import (
     near_rows,
     rows_of,
     solve_active_rows,
+)
+from optlight.planning.trajectory.between import (
+    BETWEEN_PADDING_M,
+    BETWEEN_ROUNDS,
+    BETWEEN_SAMPLES,
+    ClearPath,
+    clear_between_knots,
 )
 from optlight.planning.trajectory.following import (
     ARC_SAG_M,
@@ -56,6 +64,7 @@ from optlight.planning.trajectory.optimizer import (
     WARM_MU_INIT,
     TrajectoryNLPResult,
     TrajectoryOptimizer,
+    joined_results,
     knot_cost,
     knot_function,
 )
@@ -69,6 +78,10 @@ __all__ = [
     "ACTIVE_DISTANCE",
     "ACTIVE_ROUNDS",
     "ARC_SAG_M",
+    "BETWEEN_PADDING_M",
+    "BETWEEN_ROUNDS",
+    "BETWEEN_SAMPLES",
+    "ClearPath",
     "DEVIATION_SAMPLES",
     "FIRST_TRY_ITER",
     "MAX_PATH_REFINEMENTS",
@@ -80,7 +93,9 @@ __all__ = [
     "TrajectoryOptimizer",
     "WARM_H_TOL",
     "WARM_MU_INIT",
+    "clear_between_knots",
     "follow_planned_path",
+    "joined_results",
     "knot_cost",
     "knot_function",
     "knots_on_arcs",

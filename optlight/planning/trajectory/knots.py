@@ -32,10 +32,15 @@ def optimize_knots(
     fixed_start: bool = False,
     *,
     fallback: bool = False,
+    fixed_end: bool = False,
+    max_step: float | None = None,
 ) -> TrajectoryNLPResult:
     """The trajectory NLP (``spec``: ``[trajectory]``'s path mode and step; ``solver``: IPOPT's
     settings) of ``cell``'s robot over the path's knots, warm-started at the per-knot IK ``warm`` (K, n),
-    the first knot kept at its ``warm`` angles with ``fixed_start``; ``fallback``: the caller has
+    the first knot kept at its ``warm`` angles with ``fixed_start``, the last with ``fixed_end``,
+    each joint's step between two knots at most ``max_step`` (rad; None: ``[trajectory]
+    max_step_rad``) (the last two: a segment solved again between two postures the plan keeps,
+    :func:`~optlight.planning.trajectory.clear_between_knots`); ``fallback``: the caller has
     another way to go when this one fails (:func:`~optlight.pipeline.optimize_window`'s transfers,
     for a warm start with segments the per-knot IK did not follow).
 
@@ -91,9 +96,16 @@ def optimize_knots(
     """
     can_retry = not fallback and _warm_start_on_sphere(cell, path, warm)
     first_budget = FIRST_TRY_ITER if can_retry or fallback else None
-    first = _active_rounds(cell, spec, solver, path, warm, fixed_start, retry=False, max_iter=first_budget)
+    first = _active_rounds(
+        cell, spec, solver, path, warm, fixed_start, retry=False, max_iter=first_budget, fixed_end=fixed_end,
+        max_step=max_step,
+    )
     retry = not first.success and can_retry
-    nlp = _active_rounds(cell, spec, solver, path, warm, fixed_start, retry=True) if retry else first
+    nlp = (
+        _active_rounds(cell, spec, solver, path, warm, fixed_start, retry=True, fixed_end=fixed_end, max_step=max_step)
+        if retry
+        else first
+    )
     iterations = first.iterations + (0 if nlp is first else nlp.iterations)
     time_s = first.time_s + (0.0 if nlp is first else nlp.time_s)
     nlp = dataclasses.replace(nlp, iterations=iterations, time_s=time_s)
@@ -131,10 +143,13 @@ def _active_rounds(
     fixed_start: bool,
     retry: bool,
     max_iter: int | None = None,
+    fixed_end: bool = False,
+    max_step: float | None = None,
 ) -> TrajectoryNLPResult:
     """The solves of :func:`optimize_knots` with the active clearance rows (:func:`solve_active_rows`),
     from ``warm``, with the ``retry`` settings of :class:`TrajectoryOptimizer` or not and at most
-    ``max_iter`` iterations each (None: ``[solver] max_iter``); the last solve, with the iterations
+    ``max_iter`` iterations each (None: ``[solver] max_iter``), the last knot kept with ``fixed_end``, joint steps at most ``max_step`` (None: ``[trajectory]
+    max_step_rad``); the last solve, with the iterations
     and time of all."""
     env = cell.environment
     solves: list[TrajectoryNLPResult] = []
@@ -144,7 +159,7 @@ def _active_rounds(
         optimizer = TrajectoryOptimizer(
             cell.robot,
             path_mode=spec.path,
-            max_step=spec.max_step_rad,
+            max_step=spec.max_step_rad if max_step is None else max_step,
             joint_weights=1.0 / cell.limits.velocity**2,
             clearance=env.clearance_function(cell.robot, rows) if env and env.collisions else None,
             active=None if active is None else active[:, rows],
@@ -154,7 +169,7 @@ def _active_rounds(
             retry=retry,
             max_iter=max_iter,
         )
-        solves.append(optimizer.solve(path, cell.sphere, start, fixed_start))
+        solves.append(optimizer.solve(path, cell.sphere, start, fixed_start, fixed_end))
         return solves[-1], solves[-1].theta if solves[-1].success else None
 
     nlp = solve_active_rows(cell, warm, solve)

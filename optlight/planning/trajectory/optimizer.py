@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -260,10 +261,16 @@ class TrajectoryOptimizer:
         return np.concatenate(lbg), np.concatenate(ubg)
 
     def solve(
-        self, path: LightPath, sphere: LightSphere, theta0: Array, fixed_start: bool = False
+        self,
+        path: LightPath,
+        sphere: LightSphere,
+        theta0: Array,
+        fixed_start: bool = False,
+        fixed_end: bool = False,
     ) -> TrajectoryNLPResult:
         """Optimise the knot configurations of ``path``, warm-started at ``theta0`` (K, n); with
-        ``fixed_start``, the first knot keeps its angles from ``theta0``."""
+        ``fixed_start``, the first knot keeps its angles from ``theta0``; with ``fixed_end``, the
+        last (its bounds lower = upper = ``theta0[-1]``: the rest of the plan goes on from there)."""
         n_knots, n = path.n_knots, self.robot.n
         if n_knots < 2 and fixed_start:
             raise ValueError("a path of one knot with that knot fixed has nothing to optimise")
@@ -288,6 +295,8 @@ class TrajectoryOptimizer:
         lbg, ubg = self.bounds(n_knots, len(landmark_knots), len(off_sphere), int(fixed_start))
         lower, upper = knot_bounds(self.robot)
         lbx, ubx = np.tile(lower, len(free)), np.tile(upper, len(free))
+        if fixed_end:
+            lbx[-n:] = ubx[-n:] = np.asarray(theta0, float)[-1]
         x0 = np.clip(theta0[free].ravel(), lbx, ubx)
         start = time.perf_counter()
         out = solver(x0=x0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
@@ -317,3 +326,18 @@ def knot_cost(cell: Workcell, theta: Array) -> float:
     Σ_k Σ_j (θ_{k+1,j} − θ_{k,j})² / v_max,j² + :data:`POSTURE_WEIGHT` Σ_k |θ_k − θ_ref|² (s²)."""
     steps = np.diff(theta, axis=0) / cell.limits.velocity
     return float(np.sum(steps**2) + POSTURE_WEIGHT * np.sum((theta - cell.robot.theta_ref) ** 2))
+
+
+def joined_results(results: Sequence[TrajectoryNLPResult], theta: Array, cost: float) -> TrajectoryNLPResult:
+    """One result for several solves ``results`` of parts of one path (windows, or segments solved
+    again) at its knots ``theta`` (K, n) of ``cost``: iterations and times added, the largest |h|, the
+    statuses that occurred."""
+    return TrajectoryNLPResult(
+        theta=theta,
+        success=all(r.success for r in results),
+        status=", ".join(dict.fromkeys(r.status for r in results)),
+        cost=cost,
+        max_h_residual=max(r.max_h_residual for r in results),
+        iterations=sum(r.iterations for r in results),
+        time_s=sum(r.time_s for r in results),
+    )
