@@ -14,7 +14,9 @@ one cell cannot stall the run. Each cell ends as one of:
 - ``timeout``.
 
 Reported: the counts overall and per robot, object, task and environment; solve times (median,
-p98) of the verified cells; every refused, failed and crashed cell with its seed and message.
+p98) of the verified cells; every refused, failed and crashed cell with its seed and message; and for
+the light-set cells, the lights requested (``[lightset] count``, or the grid's directions) against
+those the plan captures (a refused cell captures none), per set kind and over all.
 
     python benchmarks/bench_cells.py [--cells 100] [--timeout 900] [--seed0 0] [--jobs N] [--out FILE]
     optlight bench cells [--quick] --out benchmarks/results/cells     (--quick: 12 cells)
@@ -71,6 +73,10 @@ def solve_one(seed: int, folder: str) -> dict[str, Any]:
 
     cell = optlight.random_cell(seed, folder)
     out: dict[str, Any] = {"seed": seed, "name": cell.name, "labels": cell.labels}
+    lightset = cell.data.get("lightset")
+    if lightset is not None:
+        out["lights_requested"] = len(lightset["grid_deg"]) if lightset["kind"] == "grid" else lightset["count"]
+        out["lights_achieved"] = 0
     start = time.perf_counter()
     try:
         with warnings.catch_warnings(record=True) as said:
@@ -89,6 +95,8 @@ def solve_one(seed: int, folder: str) -> dict[str, Any]:
             }
             out["violations"] = [str(v) for v in report.violations[:5]]
         out["captures"] = len(plan.visited)
+        if lightset is not None:
+            out["lights_achieved"] = len(plan.visited) if report.passed else 0
     except optlight.OptlightError as e:
         out["outcome"] = "refused"
         out["reason"] = reason_key(e)
@@ -146,6 +154,7 @@ def summarize(cells: list[dict[str, Any]]) -> dict[str, Any]:
         "verified_pct": 100.0 * counts.get("verified", 0) / n,
         "refused_by_reason": dict(Counter(c["reason"] for c in cells if c["outcome"] == "refused").most_common()),
         "per_category": per,
+        "lights": lights_delivered(cells),
         "solve_s": _dist([c["time_s"] for c in cells if c["outcome"] == "verified"]),
         "all_s": _dist([c["time_s"] for c in cells]),
         "not_verified": [
@@ -155,6 +164,23 @@ def summarize(cells: list[dict[str, Any]]) -> dict[str, Any]:
         ],
         "crash_tracebacks": {str(c["seed"]): c.get("traceback", "") for c in cells if c["outcome"] == "crashed"},
     }
+
+
+def lights_delivered(cells: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per light-set kind and ``all``: the cells, the lights requested and achieved (a verified plan's
+    captures; none for a cell that did not verify) and achieved/requested in %."""
+    out: dict[str, dict[str, float]] = {}
+    for c in cells:
+        if "lights_requested" not in c:
+            continue
+        for kind in (c.get("labels", {}).get("task", "?"), "all"):
+            row = out.setdefault(kind, {"cells": 0, "requested": 0, "achieved": 0})
+            row["cells"] += 1
+            row["requested"] += c["lights_requested"]
+            row["achieved"] += c["lights_achieved"]
+    for row in out.values():
+        row["achieved_pct"] = 100.0 * row["achieved"] / max(1, row["requested"])
+    return dict(sorted(out.items()))
 
 
 def run(cells: int = 100, seed0: int = 0, timeout_s: float = 900.0, jobs: int | None = None) -> dict[str, Any]:

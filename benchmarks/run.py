@@ -569,12 +569,18 @@ def batch_rows(name: str, result: Result) -> list[Row]:
 
 def cell_rows(name: str, result: Result) -> list[Row]:
     """``bench_cells``: the share of random cells verified (success %), each outcome's count, the
-    refusals by reason, the solve time of the verified cells, and the verified share per robot,
-    object, task and environment."""
+    refusals by reason, the light-set cells' lights achieved of those requested (per kind and all),
+    the solve time of the verified cells, and the verified share per robot, object, task and
+    environment."""
     cells = result["cells"]
     rows = [Row(name, f"{cells} random cells verified [%]", result["verified_pct"]["median"])]
     rows += [Row(name, f"{outcome} [cells]", count) for outcome, count in result["counts"].items()]
     rows += [Row(name, f"refused: {reason} [cells]", count) for reason, count in result["refused_by_reason"].items()]
+    for kind, lights in result.get("lights", {}).items():
+        rows.append(
+            Row(name, f"lights {kind}: achieved of {int(lights['requested'])} requested", lights["achieved"],
+                success_pct=lights["achieved_pct"])
+        )
     if result["solve_s"]:
         rows.append(Row(name, "solve, verified cells [s]", result["solve_s"]["median"], result["solve_s"]["p98"]))
     for category, table in result["per_category"].items():

@@ -74,6 +74,11 @@ class UnreachableError(OptlightError):
     """A light pose (landmark or knot) cannot be reached by the robot."""
 
 
+class OutOfReachError(UnreachableError):
+    """The robot reaches no light of the cap clear, or not a landmark it must capture, from where its
+    base is: :func:`optlight.solve` adds where a base would (:mod:`optlight.relocation`)."""
+
+
 class SolverError(OptlightError):
     """A numerical solver failed in a way the caller cannot recover from."""
 

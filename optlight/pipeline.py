@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment.view import view_check_for
-from optlight.errors import CaptureSolverError, SolverError
+from optlight.errors import CaptureSolverError, OutOfReachError, SolverError
 from optlight.geometry import LightSphere
 from optlight.motion import Trajectory
 from optlight.plan import Plan
@@ -88,6 +88,7 @@ from optlight.planning.trajectory import (
     plan_transfer,
 )
 from optlight.planning.waypoints import Waypoints, controller_waypoints
+from optlight.relocation import base_hint
 from optlight.setup import Setup
 from optlight.spec import LandmarksSpec, Problem, SolverSpec, TrajectorySpec
 from optlight.spec.sizing import check_trajectory_samples
@@ -116,8 +117,9 @@ def solve(
     (:class:`~optlight.report.FigureDrafts`), which draws the results folder's figures while the rest
     is solved.
 
-    Raises :class:`UnreachableError` for a landmark the robot cannot reach, :class:`SolverError` when
-    the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
+    Raises :class:`UnreachableError` for a landmark the robot cannot reach (naming, when it reaches
+    nothing clear or not a required landmark, a base position that would: :func:`~optlight.relocation.base_hint`),
+    :class:`SolverError` when the trajectory NLP fails. The plan is returned even when verification fails (so the report can be
     shown); :meth:`Plan.save` refuses to export it.
     """
     notify = progress or (lambda stage, done, total: None)
@@ -143,18 +145,21 @@ def solve(
 
     start = time.perf_counter()
     reacher = Reacher(cell, setup.solver, setup.image_costs)
-    with PlacementAhead(reacher, setup.landmark_spec) as ahead:
-        landmarks, design, captures, merged = choose_captures(
-            setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
-        )
-        timings["landmarks"] = time.perf_counter() - start
-        heard("landmarks", landmarks)
+    try:
+        with PlacementAhead(reacher, setup.landmark_spec) as ahead:
+            landmarks, design, captures, merged = choose_captures(
+                setup, lambda d, t: notify("landmarks", d, t), reacher, found=ahead.offer
+            )
+            timings["landmarks"] = time.perf_counter() - start
+            heard("landmarks", landmarks)
 
-        with stage("placement"):  # what is left of it once the search is done
-            if design is None:
-                placement = ahead.placement(captures)
-            else:
-                placement = place_captures(setup, captures, design, reacher)
+            with stage("placement"):  # what is left of it once the search is done
+                if design is None:
+                    placement = ahead.placement(captures)
+                else:
+                    placement = place_captures(setup, captures, design, reacher)
+    except OutOfReachError as refused:  # the refusal names the base that would reach the cap
+        raise OutOfReachError(f"{refused}; {base_hint(setup)}") from None
     heard("placement", placement)
     notes = [*([setup.start_note] if setup.start_note else []), *landmarks.notes, *merged, *placement.warnings]
 

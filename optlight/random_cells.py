@@ -17,7 +17,8 @@ seed gives the same cell. What is drawn:
 - the light sphere: radius between the object's bound plus the housing and the camera distance less
   0.15 m, cap from 0 (or 10–20°) to 40–70°;
 - the task: histogram landmarks (azimuth or free), or a light set (photometric stereo, RTI, a grid
-  of directions round the camera axis);
+  of directions round the camera axis), with ``[landmarks] allow_partial`` (a landmark or light the
+  arm cannot reach clear is dropped with a warning, the rest planned);
 - the environment, in half the cells: a table at the base or just below it (0–3 cm), the camera
   body and its stand, and a wall behind the robot in half of those.
 
@@ -155,7 +156,12 @@ def _task(rng: np.random.Generator, zenith_max: float) -> tuple[dict[str, Any], 
     }
     if task == "landmarks":
         mode = str(rng.choice(("azimuth", "free")))
-        tables["landmarks"] = {"mode": mode, "count": int(rng.integers(6, 25 if mode == "azimuth" else 13))}
+        # as a user whose arm reaches part of the cap would: the landmarks it reaches, the rest dropped
+        tables["landmarks"] = {
+            "mode": mode,
+            "count": int(rng.integers(6, 25 if mode == "azimuth" else 13)),
+            "allow_partial": True,
+        }
         return tables, task
     # a set's lights are captured in a joint-space tour; far-apart lights leave no arcs to follow
     tables["trajectory"] = {"order": "tour", "path": "free"}

@@ -270,9 +270,10 @@ def test_cell_benchmark_counts_outcomes_and_reasons(runner: ModuleType) -> None:
     )
     labels = {"robot": "ur5", "object": "face", "task": "rti", "environment": "none"}
     outcomes = [
-        {"seed": 0, "outcome": "verified", "time_s": 2.0, "labels": labels},
+        {"seed": 0, "outcome": "verified", "time_s": 2.0, "labels": labels, "lights_requested": 12, "lights_achieved": 9},
         {"seed": 1, "outcome": "verified", "time_s": 4.0, "labels": {**labels, "robot": "panda"}},
-        {"seed": 2, "outcome": "refused", "reason": "ProblemError:robot.start", "time_s": 1.0, "labels": labels},
+        {"seed": 2, "outcome": "refused", "reason": "ProblemError:robot.start", "time_s": 1.0, "labels": labels,
+         "lights_requested": 8, "lights_achieved": 0},
         {"seed": 3, "outcome": "crashed", "traceback": "Traceback ...", "time_s": 1.0, "labels": labels},
     ]
     summary = cells_bench.summarize(outcomes)
@@ -284,10 +285,13 @@ def test_cell_benchmark_counts_outcomes_and_reasons(runner: ModuleType) -> None:
     assert summary["per_category"]["robot"]["ur5"]["verified"] == 1
     assert summary["solve_s"]["median"] == 3.0
     assert [c["seed"] for c in summary["not_verified"]] == [2, 3]
+    assert summary["lights"]["rti"] == {"cells": 2, "requested": 20, "achieved": 9, "achieved_pct": 45.0}
+    assert summary["lights"]["all"]["achieved"] == 9
     summary["verified_pct"] = {"median": 50.0, "p98": 50.0}
     rows = runner.cell_rows("cells", summary)
     assert rows[0].median == 50.0
     assert any(r.metric == "refused: ProblemError:robot.start [cells]" and r.median == 1 for r in rows)
+    assert any(r.metric == "lights rti: achieved of 20 requested" and r.median == 9 for r in rows)
 
 
 def test_a_plan_metric_the_baseline_lacks_has_no_baseline(runner: ModuleType) -> None:

@@ -78,6 +78,7 @@ def test_cells_are_sensible(cells):
         assert ls.radius_m >= bound + p.light.housing_length_m
         assert distance > ls.radius_m
         assert 40.0 <= ls.zenith_max_deg <= 70.0 and ls.zenith_min_deg <= 20.0
+        assert p.landmarks.allow_partial, cell.name  # the landmarks or lights the arm reaches are planned
         if p.environment.enabled:
             table = p.environment.table_height_m
             assert table is not None and -0.03 - 1e-9 <= table <= 0.0

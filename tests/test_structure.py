@@ -41,6 +41,7 @@ LAYERS: list[set[str]] = [
     {"viz"},
     {"report"},
     {"plan"},
+    {"relocation"},
     {"pipeline", "preflight"},
     {"acquisition", "batch", "simulation"},
     {"cell"},

@@ -18,7 +18,11 @@ Bodies are the URDF links (all geometry objects of one link) plus "light". Pairs
   such as a base resting on the table, are not checked: nothing the planner does changes them);
 - ``self``: body pairs on different joints that are not adjacent (one joint the parent of the other),
   not disabled by the robot's SRDF, and not already in contact at the reference configuration θ_ref
-  (touching by design, as MoveIt's "Default"); threshold ``self_margin``;
+  (touching by design, as MoveIt's "Default"); threshold ``self_margin``. A pair whose relative pose
+  depends on at most :data:`NEVER_JOINTS` joints and that stays beyond ``self_margin`` at every angle
+  of those joints (:meth:`CollisionModel._never_close`, as MoveIt's "Never") is checked exactly but
+  gets no sphere rows: the lamp's housing next to a UR's first wrist link, 17 mm apart at the
+  closest, is within the margin for the two spheres that cover them at every posture;
 - ``view``: every moving body × the view cone, threshold 0 (the cone's margin is in its angle).
 
 For the NLPs, :attr:`CollisionModel.spheres` cover every body (:mod:`.spheres`); the rows of the
@@ -29,6 +33,7 @@ bound of its first joint's origin and sd is 1-Lipschitz), and all sphere pairs o
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -39,6 +44,7 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
+from optlight.cache import cached_arrays
 from optlight.environment.shapes import SMOOTHING_M, HalfSpace, Obstacle, ViewCone
 from optlight.environment.spheres import BodySpheres, RobotSpheres, fit_spheres
 from optlight.errors import RobotError
@@ -55,6 +61,13 @@ PairKind = Literal["obstacle", "self", "view"]
 #: reference is still a capture posture (with 1 mm, a UR5 over a table at its base's height had no
 #: light clear: its upper arm's sphere keeps about the same height at every angle).
 REFERENCE_SLACK_M = 0.005
+#: Self pairs whose relative pose depends on at most this many joints are swept over those joints for
+#: a margin they can never break (:meth:`CollisionModel._never_close`).
+NEVER_JOINTS = 2
+#: Finest box width (deg) of that sweep's branch and bound: a pair it has not decided then may come close.
+NEVER_STEP_DEG = 0.5
+#: Changed whenever what :meth:`CollisionModel._never_close` computes changes (its disk cache).
+_NEVER_VERSION = 1
 #: Sphere–obstacle rows are kept when the sphere can come this close beyond the margin (m).
 PRUNE_SLACK_M = 0.05
 #: Name of the light housing body.
@@ -144,6 +157,7 @@ class CollisionModel:
     Attributes: ``robot``; ``geometry`` (pin.GeometryModel) and ``geometry_data``; ``bodies``
     (tuple of :class:`Body`, robot links then the light); ``obstacles``; ``view_cone`` (or None);
     ``pairs`` (tuple of :class:`Pair`); ``ignored_self_pairs`` (body-name pairs in contact at θ_ref);
+    ``never_close_pairs`` (body-name pairs that can never come within ``self_margin``: no sphere rows);
     ``spheres`` (:class:`RobotSpheres`, same body order); ``obstacle_rows`` ((S_o, 2) int: sphere,
     obstacle index), ``obstacle_row_margin`` ((S_o,) m: each row's margin,
     :meth:`_obstacle_row_margins`), ``self_rows`` ((S_s, 2) int: sphere, sphere), ``self_row_margin`` ((S_s,) m:
@@ -183,6 +197,7 @@ class CollisionModel:
         touching, exact_ref = self._touching_at_reference(candidates, body_of)
         self.pairs = self._collision_pairs(n_robot, candidates, touching, obstacle_ids, cone_id, body_of)
         self.motion_weights = self._motion_weights(n_robot)
+        self.never_close_pairs = self._never_close(body_of, surfaces)
         self._sphere_rows(surfaces, max_spheres, obstacle_ids, body_of, exact_ref)
 
     # ------------------------------------------------------------------ builders (in __init__'s order)
@@ -348,7 +363,7 @@ class CollisionModel:
             {
                 tuple(sorted((body_index[p.first_body], body_index[p.second_name])))
                 for p in self.pairs
-                if p.kind == "self"
+                if p.kind == "self" and _ordered(p.first_body, p.second_name) not in self.never_close_pairs
             }
         )
         sb = self.spheres.body
@@ -456,6 +471,97 @@ class CollisionModel:
                 else:
                     weights[g, model.joints[j].idx_v] = self._link_length(chain[i + 1 :]) + extent
         return weights
+
+    def _never_close(self, body_of: dict[int, Body], surfaces: list[trimesh.Trimesh]) -> tuple[tuple[str, str], ...]:
+        """Body pairs of the self pairs that can never come within ``self_margin`` (sorted names).
+
+        The relative pose of geometries a and b, one on an ancestor joint of the other's, depends only
+        on the k joints between them. For k ≤ :data:`NEVER_JOINTS`, over a whole turn of each (wider
+        than any revolute limit; the other joints at θ_ref) :meth:`_clear_everywhere` proves the exact
+        distance above the margin or finds where it may not be. A body pair is listed when all its
+        geometry pairs are proven. Prismatic joints in between leave the pair out. Each verdict
+        depends only on the two shapes (``surfaces``), the joints between and the margin, and is kept
+        in the disk cache (:mod:`optlight.cache`). Ends with the geometry placed at θ_ref."""
+        robot = self.robot
+        verdict: dict[tuple[str, str], bool] = {}
+        for pair in self.pairs:
+            key = _ordered(pair.first_body, pair.second_name)
+            if pair.kind != "self" or not verdict.get(key, True):
+                continue
+            between = self._joints_between(int(body_of[pair.first].joint), int(body_of[pair.second].joint))
+            verdict[key] = (
+                between is not None
+                and len(between) <= NEVER_JOINTS
+                and all(self._travel(j) == 0.0 for j in between)
+                and self._cached_clear(pair.first, pair.second, between, surfaces)
+            )
+        pin.updateGeometryPlacements(
+            robot.model, robot.data, self.geometry, self.geometry_data, robot.to_pin(robot.theta_ref)
+        )
+        return tuple(sorted(k for k, never in verdict.items() if never))
+
+    def _cached_clear(self, a: int, b: int, between: list[int], surfaces: list[trimesh.Trimesh]) -> bool:
+        """:meth:`_clear_everywhere` of geometries ``a`` and ``b`` over the joints ``between``,
+        through the disk cache (keyed by the shapes, the joints' placements and kinds, the margin)."""
+        model = self.robot.model
+        digest = hashlib.sha256(f"never-close {_NEVER_VERSION} {NEVER_STEP_DEG} {self.self_margin!r}".encode())
+        for g in (a, b):
+            digest.update(np.ascontiguousarray(surfaces[g].vertices, float).tobytes())
+            digest.update(np.ascontiguousarray(self.geometry.geometryObjects[g].placement.homogeneous).tobytes())
+        for j in between:
+            digest.update(model.joints[j].shortname().encode())
+            digest.update(np.ascontiguousarray(model.jointPlacements[j].homogeneous).tobytes())
+        index = [model.joints[j].idx_v for j in between]
+        found = cached_arrays(
+            "never_close",
+            digest.hexdigest(),
+            lambda: {"clear": np.array(self._clear_everywhere(a, b, index))},
+        )
+        return bool(found["clear"])
+
+    def _clear_everywhere(self, a: int, b: int, index: list[int]) -> bool:
+        """Whether geometries ``a`` and ``b`` stay beyond ``self_margin`` for every value of the
+        revolute joint angles θ[index] in [−π, π)ᵏ: branch and bound over boxes of those angles. At a
+        box's centre the exact distance is d; within its half-widths w_i a point of either geometry
+        moves at most Σ_i ρ_i w_i (:attr:`motion_weights`), so d − Σ_i ρ_i w_i > margin clears the
+        box, d ≤ margin refutes, and a box neither decides is cut in 2ᵏ, down to half-widths of
+        :data:`NEVER_STEP_DEG` / 2 (then it counts as refuted)."""
+        robot = self.robot
+        rho = self.motion_weights[[a, b]][:, index].max(axis=0)
+        smallest = np.radians(NEVER_STEP_DEG) / 2
+        half = np.pi / 4
+        starts = np.arange(-np.pi + half, np.pi, 2 * half)
+        boxes = [(np.array(c), half) for c in np.stack(np.meshgrid(*[starts] * len(index), indexing="ij"), -1).reshape(-1, len(index))]
+        corners = np.stack(np.meshgrid(*[[-0.5, 0.5]] * len(index), indexing="ij"), -1).reshape(-1, len(index))
+        while boxes:
+            center, half = boxes.pop()
+            theta = robot.theta_ref.copy()
+            theta[index] = center
+            q = robot.to_pin(theta)
+            pin.forwardKinematics(robot.model, robot.data, q)
+            for g in (a, b):
+                self.geometry_data.oMg[g] = robot.data.oMi[self.geometry.geometryObjects[g].parentJoint] * (
+                    self.geometry.geometryObjects[g].placement
+                )
+            d = self.distance(a, b)
+            if d <= self.self_margin:
+                return False
+            if d - float(rho.sum()) * half > self.self_margin:
+                continue
+            if half / 2 < smallest:
+                return False
+            boxes += [(center + half * c, half / 2) for c in corners]
+        return True
+
+    def _joints_between(self, a: int, b: int) -> list[int] | None:
+        """The joints after the ancestor of joints ``a`` and ``b`` up to the other (both on one chain),
+        which alone move one relative to the other; None when neither is the other's ancestor."""
+        chain_a, chain_b = self._chain(a), self._chain(b)
+        if a == 0 or a in chain_b:
+            return [j for j in chain_b if j not in chain_a]
+        if b == 0 or b in chain_a:
+            return [j for j in chain_a if j not in chain_b]
+        return None
 
     def _fixed_obstacle_distances(
         self, obstacle_ids: list[int], body_of: dict[int, Body]

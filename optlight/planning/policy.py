@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from optlight.environment import CAPTURE_SLACK
-from optlight.errors import IPOPT_ITERATION_LIMIT, UnreachableError
+from optlight.errors import IPOPT_ITERATION_LIMIT, OutOfReachError
 from optlight.planning.jerk import rest_to_rest_duration
 from optlight.planning.landmarks import Landmark, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
@@ -141,7 +141,7 @@ def place_landmarks(
     :class:`AzimuthPlacement`: the best light the robot reaches clear on the landmark's azimuth) puts
     another light in its place, with a warning that says how far it moved and why.
 
-    Raises :class:`UnreachableError` naming the first landmark neither reaches (with both reasons),
+    Raises :class:`OutOfReachError` naming the first landmark neither reaches (with both reasons),
     unless ``spec.allow_partial`` (``[landmarks]``), which drops it with a warning.
     """
     chain = PlacementChain(reacher, spec, replacement=replacement)
@@ -166,7 +166,7 @@ class PlacementChain:
 
     def add(self, lm: Landmark) -> None:
         """Place ``lm`` after the landmarks added before it (:func:`place_landmarks`); raises
-        :class:`UnreachableError` as it does."""
+        :class:`OutOfReachError` as it does."""
         robot = self.reacher.cell.robot
         attempts = []
         for start, restarts in ((self.previous, False), (robot.theta_ref, True)):
@@ -195,9 +195,7 @@ class PlacementChain:
             f"{np.rad2deg(lm.azimuth):.1f}°) is {why}; {found}"
         )
         if not self.spec.allow_partial:
-            raise UnreachableError(
-                f"{where}; move the robot base ([robot] base_position_m) or set [landmarks] allow_partial = true"
-            )
+            raise OutOfReachError(f"{where}; set [landmarks] allow_partial = true to plan the landmarks it reaches")
         self.notes.append(f"dropped {where}")
 
     def _keep(self, lm: Landmark, theta: Array) -> None:
@@ -206,9 +204,9 @@ class PlacementChain:
         self.previous = theta
 
     def finish(self) -> LandmarkPlacement:
-        """The placement of the landmarks added; raises :class:`UnreachableError` when none is kept."""
+        """The placement of the landmarks added; raises :class:`OutOfReachError` when none is kept."""
         if not self.kept:
-            raise UnreachableError(f"no landmark is reachable by {self.reacher.cell.robot.name}")
+            raise OutOfReachError(f"no landmark is reachable by {self.reacher.cell.robot.name}")
         thetas = _follow_back(self.reacher, self.kept, np.array(self.thetas))
         return LandmarkPlacement(tuple(self.kept), thetas, tuple(self.notes))
 

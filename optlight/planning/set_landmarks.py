@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from optlight.errors import UnreachableError
+from optlight.errors import OutOfReachError
 from optlight.geometry import LightSphere
 from optlight.planning.landmarks import CostGrid, Landmark, LandmarkSet, exact_cost
 from optlight.planning.lightsets import (
@@ -113,10 +113,10 @@ def landmarks_of_set(
         step = spec.reach_step_deg
         reach = reachability_map(reacher, step, 2.0 * step, progress=progress)
         if not reach.clear.any():  # nothing to design over or replace with: say so before the NLPs
-            raise UnreachableError(
+            raise OutOfReachError(
                 f"{cell.robot.name} reaches no light of the cap clear of the environment and the camera's "
                 f"view (reachability map, {reach.success.size} cells, {100 * reach.reachable_fraction:.0f} % "
-                "reached by the IK); move the robot base ([robot] base_position_m) or widen [light_sphere]"
+                "reached by the IK)"
             )
         field = ClearField.from_map(reach)
     if isinstance(wanted, Grid):
@@ -191,7 +191,7 @@ def fitting_count(
 ) -> int:
     """How many lights the set gets: ``spec.count`` (``[lightset] count``), or the number of the
     map's clear lights ``pool`` when that is fewer (``landmark_spec.allow_partial``; an
-    :class:`UnreachableError` naming ``robot`` that says how many fit otherwise)."""
+    :class:`OutOfReachError` naming ``robot`` that says how many fit otherwise; solve adds a base)."""
     if len(pool) >= spec.count:
         return spec.count
     where = (
@@ -200,9 +200,7 @@ def fitting_count(
         f"{int(reach.clear.sum())} clear cells) for a set of {spec.count}"
     )
     if not landmark_spec.allow_partial or len(pool) < 1:
-        raise UnreachableError(
-            f"{where}: set [lightset] count = {len(pool)} (or less), or move the robot base ([robot] base_position_m)"
-        )
+        raise OutOfReachError(f"{where}: set [lightset] count = {len(pool)} (or less)")
     return len(pool)
 
 

@@ -9,10 +9,14 @@ panda     ``panda_hand_tcp``       SRDF ``default``
 ur3/5/10  ``tool0``                (0, −π/2, π/2, −π/2, −π/2, 0)
 xarm7     ``link_eef``             (0, −0.5, 0, 1, 0, 1.5, 0)
 kinova    ``j2s6s200_end_effector``  SRDF ``arm_up`` [1]
-z1        ``gripperStator``        (0, 1.2, −1.0, −0.2, 0, 0)
+z1        ``gripperStator`` [2]    (0, 1.2, −1.0, −0.2, 0, 0)
 ========  =======================  =============================
 
 [1] Joint values outside the URDF limits are wrapped by ±2π (the same pose).
+[2] The flange is :attr:`RobotInfo.tool_offset_m` = 0.155 m out along the tool axis: the z1's
+gripper (its collision meshes) reaches 0.149 m ahead of ``gripperStator``, so a lamp there would
+shine into its own jaws at every posture (the beam 100 % blocked); the lamp is held just beyond the
+fingertips.
 
 **Joint limits** (:data:`ROBOTS`, each row cites its source): velocity = min(URDF, the maker's
 published joint speed), acceleration and jerk from the maker where published. Where a maker publishes
@@ -56,7 +60,8 @@ class RobotInfo:
     """Where a named robot's files are and how optlight uses it.
 
     ``urdf``/``srdf`` are relative to example-robot-data's ``robots`` folder; ``tool_rpy_deg`` rotates
-    the URDF tool frame into the flange frame (+z out of the tool); ``reference`` names an SRDF
+    the URDF tool frame into the flange frame (+z out of the tool), ``tool_offset_m`` moves the flange
+    that far (m) along that +z (past a gripper the lamp must shine clear of); ``reference`` names an SRDF
     reference configuration, else ``theta_ref`` is used; ``locked_joints`` are held at 0;
     ``torque_limit`` (N·m) the maker's published joint torques and ``torque_source`` where they are
     published (None: the URDF's effort limits, if it has them).
@@ -66,6 +71,7 @@ class RobotInfo:
     srdf: str | None
     tool_frame: str
     tool_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tool_offset_m: float = 0.0
     reference: str | None = None
     theta_ref: tuple[float, ...] | None = None
     locked_joints: tuple[str, ...] = ()
@@ -178,6 +184,7 @@ ROBOTS: dict[str, RobotInfo] = {
         "z1_description/srdf/z1.srdf",
         "gripperStator",
         tool_rpy_deg=(0.0, 90.0, 0.0),
+        tool_offset_m=0.155,
         theta_ref=(0.0, 1.2, -1.0, -0.2, 0.0, 0.0),
         locked_joints=("jointGripper",),
         # Unitree's URDF: π rad/s on every joint; no published acceleration: ours

@@ -509,6 +509,8 @@ def _add_light_frames(model: pin.Model, spec: RobotSpec, files: _RobotFiles, fil
                 f"{spec.name}: the URDF already has a frame named {taken!r}, which optlight adds"
             )
     fix = placement((0, 0, 0), files.info.tool_rpy_deg if spec.frame is None else (0, 0, 0))
+    if spec.frame is None:  # the named robot's flange, past its gripper (RobotInfo.tool_offset_m)
+        fix = fix * pin.SE3(np.eye(3), np.array([0.0, 0.0, files.info.tool_offset_m]))
     flange_id = model.addFrame(
         pin.Frame(
             "flange",

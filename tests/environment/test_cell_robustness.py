@@ -110,6 +110,78 @@ def test_spheres_against_coal_per_robot(name: str) -> None:
             assert gap.min() <= cm.distance(p.first, p.second) + 1e-9, (name, p.first_body, p.second_name)
 
 
+@pytest.mark.parametrize("name", ["ur5", "ur10", "kinova"])
+def test_pairs_that_never_come_close_have_no_sphere_rows(name: str) -> None:
+    """A self pair proven never within the margin (the joints between swept by branch and bound) gets
+    no sphere rows, and coal agrees at random configurations (sampled here, not swept); on the UR5
+    the lamp's housing and the first wrist link, whose two spheres break the margin at every posture,
+    are such a pair, and the housing and the forearm, which can touch, are not."""
+    robot, _, cm = _model(name)
+    never = set(cm.never_close_pairs)
+    if name == "ur5":
+        assert ("light", "wrist_1_link") in never and ("forearm_link", "light") not in never
+    assert never
+    names = [b.name for b in cm.spheres.bodies]
+    row_pairs = {tuple(sorted((names[cm.spheres.body[s]], names[cm.spheres.body[t]]))) for s, t in cm.self_rows}
+    assert not never & row_pairs
+    pairs = [p for p in cm.pairs if p.kind == "self" and tuple(sorted((p.first_body, p.second_name))) in never]
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        theta = rng.uniform(-np.pi, np.pi, robot.n)
+        pin.updateGeometryPlacements(robot.model, robot.data, cm.geometry, cm.geometry_data, robot.to_pin(theta))
+        for p in pairs:
+            assert cm.distance(p.first, p.second) > cm.self_margin, (p.first_body, p.second_name)
+
+
+@pytest.mark.slow
+def test_ur5_cap_is_clear_where_coal_says_so(tmp_path) -> None:
+    """A UR5 cell (random cell 19: a mesh, an RTI set, a table, a wall and the camera's stand) whose
+    every reached light the spheres of the housing and the first wrist link took away: its
+    reachability map now has clear lights, and coal finds the map's postures there clear of
+    everything and out of the view."""
+    from optlight.planning.policy import Reacher
+    from optlight.planning.reach import reachability_map
+
+    setup = Setup.from_problem(random_cell(19, tmp_path).problem)
+    reach = reachability_map(Reacher(setup.workcell, setup.solver, setup.image_costs), 10.0, 20.0)
+    assert reach.clear_fraction > 0.3
+    assert setup.environment is not None
+    thetas = reach.theta[reach.clear]
+    report = setup.environment.check(setup.robot, thetas, np.arange(len(thetas)), capture_times=np.arange(len(thetas)))
+    assert report.passed, report.summary()
+
+
+@pytest.mark.slow
+def test_a_cell_the_arm_cannot_reach_names_a_base_that_reaches_it(tmp_path) -> None:
+    """A Z1 cell (random cell 4, every landmark asked for) whose cap the arm reaches clear almost
+    nowhere (its wrist cannot turn the lamp far enough sideways): the refusal names a base position,
+    and there, the generalized IK from random starts and coal's exact check (not the map the
+    suggestion was made with) find clear lights."""
+    from optlight.robot import generalized_ik
+
+    cell = random_cell(4, tmp_path)
+    asked = {**cell.data, "landmarks": {**cell.data["landmarks"], "allow_partial": False}}
+    with pytest.raises(optlight.UnreachableError, match=r"move the robot base: \[robot\] base_position_m = \[") as e:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            optlight.solve(problem_from_dict(asked))
+    named = re.search(r"base_position_m = (\[[^\]]*\]) reaches (\d+) of", str(e.value))
+    assert named is not None and int(named.group(2)) >= 1
+    data = {**asked, "robot": {**cell.data["robot"], "base_position_m": eval(named.group(1))}}
+    moved = Setup.from_problem(problem_from_dict(data))
+    assert moved.environment is not None
+    sphere, robot, rng = moved.sphere, moved.robot, np.random.default_rng(3)
+    clear = 0
+    for zenith in np.radians(np.arange(np.degrees(sphere.zenith_min), np.degrees(sphere.zenith_max) + 1e-9, 10.0)):
+        for azimuth in np.radians(np.arange(0.0, 360.0, 20.0)):
+            for start in [robot.theta_ref, *robot.random_configuration(rng, 8)]:
+                ik = generalized_ik(robot, sphere, sphere.position(zenith, azimuth), start, restarts=False, **moved.ik)
+                if ik.success and moved.environment.check(robot, ik.theta[None], [0.0], capture_times=[0.0]).passed:
+                    clear += 1
+                    break
+    assert clear >= 1
+
+
 def _ur5_cell(**robot) -> dict:
     """A UR5 with a face 0.5 m in front of its base at the height of its reference tool position, the
     camera to its left, a table at the base: the reference configuration reaches into the face."""

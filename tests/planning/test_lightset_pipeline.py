@@ -13,7 +13,7 @@ from conftest import reacher_of, reduced_problem
 
 import optlight
 from optlight.datasets import read_diligent
-from optlight.errors import UnreachableError
+from optlight.errors import OutOfReachError
 from optlight.photometric_stereo import gbuffer_normal_map
 from optlight.pipeline import choose_captures, place_captures
 from optlight.plan import PHOTOMETRIC_STEREO_FOLDER, Plan
@@ -253,5 +253,5 @@ def test_a_set_the_robot_reaches_nowhere_is_refused_after_the_map() -> None:
         robot={"base_position_m": [3.0, 0.0, 0.0]},
         lightset={"count": 4, "starts": 1, "reach_step_deg": 20.0},
     )
-    with pytest.raises(UnreachableError, match=r"reaches no light of the cap clear .*reachability map, 27 cells, 0 %"):
+    with pytest.raises(OutOfReachError, match=r"reaches no light of the cap clear .*reachability map, 27 cells, 0 %"):
         choose_captures(Setup.from_problem(problem))

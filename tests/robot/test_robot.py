@@ -125,6 +125,30 @@ def test_flange_z_points_out_of_the_tool() -> None:
     assert np.allclose(r.frame_pose("flange", t).homogeneous, r.frame_pose("panda_hand_tcp", t).homogeneous)
 
 
+@pytest.mark.parametrize("name", SUPPORTED_ROBOTS)
+def test_no_link_of_the_hand_stands_in_the_beam(name: str) -> None:
+    """The geometry carried with the light (its joint's collision shapes, as surfaces) has no point in
+    the cone of half-angle 30° ahead of the light (the Panda's fingertips stand 43° off its axis), so
+    no posture puts it in the middle of the beam: the z1's gripper reached 0.149 m ahead of ``gripperStator``, where
+    its flange was, and blocked the beam at every capture."""
+    from optlight.environment.collision import _surface
+
+    r = robot(name)
+    joint = r.model.frames[r.light_frame_id].parentJoint
+    geom = r.geometry_model("collision")
+    theta = configurations(r, 1)[0]
+    pin.forwardKinematics(r.model, r.data, r.to_pin(theta))
+    position, rotation = r.light_pose(theta)
+    for obj in geom.geometryObjects:
+        if obj.parentJoint != joint:
+            continue
+        surface = _surface(obj.geometry, obj.name).apply_transform((r.data.oMi[joint] * obj.placement).homogeneous)
+        offset = np.asarray(surface.vertices) - position
+        along = offset @ rotation[:, 2]
+        across = np.linalg.norm(offset - along[:, None] * rotation[:, 2], axis=1)
+        assert not np.any((along > 0.0) & (across < along * np.tan(np.radians(30.0)))), (name, obj.name)
+
+
 def test_base_placement_moves_everything_consistently() -> None:
     base = RobotSpec(name="panda", base_position_m=(0.3, -0.2, 0.1), base_rpy_deg=(5.0, -10.0, 30.0))
     moved, ref = load_robot(base), robot("panda")
