@@ -12,14 +12,11 @@ import pytest
 import optlight
 from optlight.errors import CaptureSolverError
 from optlight.pipeline import capture_path, knots_on_path, optimize_path, time_knots, verify_knots
+from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.path import LightPath
 from optlight.planning.policy import knot_ik
-from optlight.planning.trajectory import (
-    TRANSFER_PADDING,
-    TRANSFER_STEP,
-    TrajectoryNLPResult,
-    clear_between_knots,
-)
+from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
+from optlight.planning.trajectory.between import timed_between
 from optlight.setup import Setup
 from optlight.spec import Problem, SolverSpec, TrajectorySpec, problem_from_dict
 from optlight.workcell import Workcell
@@ -191,50 +188,28 @@ def test_knots_on_either_side_of_a_thin_plate_are_refined_and_the_timed_motion_v
     np.testing.assert_array_equal(clear.timed_knots[[0, -1]], nlp.theta[[0, -1]])  # the captures kept
 
 
-def _one_capture_path(setup: Setup, theta: np.ndarray) -> LightPath:
-    """A path of one capture at the posture ``theta`` (n,): its timing is the approach, the dwell
-    and the retreat."""
-    position, rotation = setup.robot.light_pose(theta)
-    offset = position - setup.sphere.center
-    return LightPath(
-        (offset / np.linalg.norm(offset))[None],
-        position[None],
-        rotation[None],
-        np.array([0]),
-        np.array([0]),
-        np.zeros(0, bool),
+
+def test_the_check_between_knots_looks_where_the_timed_motion_goes(small_setup: Setup) -> None:
+    """The configurations the check between knots looks at are on the jerk-limited timing's motion
+    through the knots (sampled at 20 kHz), not on the straight lines between them, which the motion
+    swings past where the path turns."""
+    limits = small_setup.limits
+    rng = np.random.default_rng(3)
+    steps = np.cumsum(rng.normal(0.0, 1.0, (6, small_setup.robot.n)), axis=0)
+    knots = small_setup.workcell.start + 0.1 * np.sign(steps) * rng.uniform(0.5, 1.0, steps.shape)
+    knots = np.vstack([small_setup.workcell.start, knots])  # a zig-zag, 0.05–0.1 rad steps
+    bounds = (limits.lower, limits.upper)
+    samples = timed_between(knots, bounds)
+    assert len(samples) == len(knots) - 1
+    trajectory = jerk_limited_timing(
+        [knots], limits.velocity, limits.acceleration, limits.jerk, 0.1, position_bounds=bounds
     )
+    motion = trajectory.sample(trajectory.sample_times(20000.0))[0]
 
+    def off_motion(q: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(q[:, None, :] - motion[None, :, :], axis=2).min(axis=1)
 
-@pytest.mark.slow
-def test_a_plate_between_two_clear_knots_of_the_approach_is_planned_around_and_the_motion_verifies(
-    small_default: Problem, default_plan: optlight.Plan
-) -> None:
-    """A thin plate across the way panda_link5 takes from the start to the first capture, between two
-    knots of the straight approach that both clear it (by the NLPs' sphere model, with the transfer's
-    padding: the approach was that line): the timed approach and retreat pass the pipeline's own
-    verification (exact coal distances at ≥ 1 kHz)."""
-    robot, goal = default_plan.setup.robot, default_plan.landmark_thetas[0]
-    start = default_plan.setup.workcell.start
-    count = int(np.ceil(np.abs(goal - start).max() / TRANSFER_STEP)) + 1
-    line = start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)  # the approach without obstacles
-    for i in range(1, count - 2):
-        middle, step = 0.5 * (line[i] + line[i + 1]), 0.01 * (goal - start)
-        center = _frame_position(robot, middle, "panda_link5")
-        normal = _frame_position(robot, middle + step, "panda_link5") - _frame_position(
-            robot, middle - step, "panda_link5"
-        )
-        setup = Setup.from_problem(_with_plate(small_default, center, normal))
-        env = setup.environment
-        assert env is not None
-        rows = [env.sphere_clearance(robot, q, beam=False)[0].min() for q in line[1:-1]]
-        dense = _dense(line)
-        if min(rows) >= TRANSFER_PADDING and not env.check(robot, dense, np.arange(len(dense), dtype=float)).passed:
-            break
-    else:
-        pytest.fail("no two knots of the default plan's approach are clear on either side of a plate")
+    assert off_motion(np.vstack(samples)).max() < 2e-4  # rad: on the motion, to its sampling
+    chords = np.vstack([(a + b) / 2 for a, b in zip(knots[:-1], knots[1:], strict=True)])
+    assert off_motion(chords).max() > 5e-3  # the straight line's middles are not
 
-    position = default_plan.visited[0].position
-    trajectory = time_knots(setup, _one_capture_path(setup, goal), goal[None])
-    report = verify_knots(setup, trajectory, position[None], goal[None], np.zeros(0, bool))
-    assert report.passed, report.summary()
