@@ -37,6 +37,7 @@ the solve draws nothing and writes nothing):
 
 from __future__ import annotations
 
+import dataclasses
 import queue
 import threading
 import time
@@ -86,6 +87,7 @@ from optlight.planning.trajectory import (
     knots_on_arcs,
     optimize_knots,
     plan_transfer,
+    whole_turns,
 )
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.relocation import base_hint
@@ -208,6 +210,12 @@ def solve(
                 positions = np.array([lm.position for lm in visited])
                 path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
                 warm, failures = knot_ik(cell, path, landmark_thetas)
+        # the same postures, each revolute joint at the turn nearest the start: shortest transfers
+        turns = whole_turns(cell, cell.start, clear.timed_knots, trajectory_spec.return_home)
+        if turns.any():
+            landmark_thetas, warm = landmark_thetas + turns, warm + turns
+            nlp = dataclasses.replace(nlp, theta=nlp.theta + turns)
+            clear = dataclasses.replace(clear, warm=warm, nlp=nlp, timed_knots=clear.timed_knots + turns)
     heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
     lightset = (
         set_summary(cell.sphere, design, visited, landmark_thetas, np.arange(len(visited))) if design else None

@@ -12,9 +12,11 @@ import pytest
 import optlight
 from optlight.errors import CaptureSolverError
 from optlight.pipeline import capture_path, knots_on_path, optimize_path, time_knots, verify_knots
+from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.path import LightPath
 from optlight.planning.policy import knot_ik
 from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
+from optlight.planning.trajectory.between import timed_between
 from optlight.setup import Setup
 from optlight.spec import Problem, SolverSpec, TrajectorySpec, problem_from_dict
 from optlight.workcell import Workcell
@@ -184,3 +186,30 @@ def test_knots_on_either_side_of_a_thin_plate_are_refined_and_the_timed_motion_v
     )
     assert report.passed, report.summary()
     np.testing.assert_array_equal(clear.timed_knots[[0, -1]], nlp.theta[[0, -1]])  # the captures kept
+
+
+
+def test_the_check_between_knots_looks_where_the_timed_motion_goes(small_setup: Setup) -> None:
+    """The configurations the check between knots looks at are on the jerk-limited timing's motion
+    through the knots (sampled at 20 kHz), not on the straight lines between them, which the motion
+    swings past where the path turns."""
+    limits = small_setup.limits
+    rng = np.random.default_rng(3)
+    steps = np.cumsum(rng.normal(0.0, 1.0, (6, small_setup.robot.n)), axis=0)
+    knots = small_setup.workcell.start + 0.1 * np.sign(steps) * rng.uniform(0.5, 1.0, steps.shape)
+    knots = np.vstack([small_setup.workcell.start, knots])  # a zig-zag, 0.05–0.1 rad steps
+    bounds = (limits.lower, limits.upper)
+    samples = timed_between(knots, bounds)
+    assert len(samples) == len(knots) - 1
+    trajectory = jerk_limited_timing(
+        [knots], limits.velocity, limits.acceleration, limits.jerk, 0.1, position_bounds=bounds
+    )
+    motion = trajectory.sample(trajectory.sample_times(20000.0))[0]
+
+    def off_motion(q: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(q[:, None, :] - motion[None, :, :], axis=2).min(axis=1)
+
+    assert off_motion(np.vstack(samples)).max() < 2e-4  # rad: on the motion, to its sampling
+    chords = np.vstack([(a + b) / 2 for a, b in zip(knots[:-1], knots[1:], strict=True)])
+    assert off_motion(chords).max() > 5e-3  # the straight line's middles are not
+

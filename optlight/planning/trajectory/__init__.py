@@ -72,6 +72,7 @@ from optlight.planning.trajectory.transfer import (
     TRANSFER_PADDING,
     TRANSFER_STEP,
     plan_transfer,
+    whole_turns,
 )
 
 __all__ = [
@@ -102,6 +103,7 @@ __all__ = [
     "near_rows",
     "optimize_knots",
     "plan_transfer",
+    "whole_turns",
     "rows_of",
     "solve_active_rows",
 ]

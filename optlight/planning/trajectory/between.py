@@ -12,18 +12,19 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 
 from optlight.environment.check import EnvironmentReport, PairClearance
 from optlight.errors import CaptureSolverError, SolverError
+from optlight.planning.chord import chord_path
 from optlight.planning.path import LightPath
 from optlight.planning.trajectory.knots import optimize_knots
 from optlight.planning.trajectory.optimizer import Array, TrajectoryNLPResult, joined_results, knot_cost
 from optlight.spec import SolverSpec, TrajectorySpec
 from optlight.workcell import Workcell
 
-#: Most configurations per knot interval at which the exact check looks between two knots (on the
-#: straight line in joint space; the timed spline through knots this close stays within a fraction
-#: of a mm of it).
+#: Most configurations per interval of the timed spline at which the exact check looks between two
+#: knots (:func:`timed_between`).
 BETWEEN_SAMPLES = 8
 #: Largest joint step (rad) between two configurations the check looks at (fewer on short intervals).
 BETWEEN_STEP_RAD = 0.04
@@ -34,7 +35,7 @@ BETWEEN_ROUNDS = 4
 #: with each round of added knots.
 STEP_SHRINK = 3.0
 #: An interval is too close when an exact distance on it is below its threshold plus this (m): the
-#: timed spline is not exactly the straight line the check samples.
+#: verification samples the timed spline more densely than the check.
 BETWEEN_PADDING_M = 1e-3
 #: A sphere row this far below 0 (m) sends an interval to the exact check (the NLP's knots hold the
 #: rows to IPOPT's tolerance, ~1e-9 m below).
@@ -73,8 +74,8 @@ def clear_between_knots(
     only at them (``spec``, ``solver``: ``[trajectory]`` and ``[solver]``, for the segments' re-solves).
 
     Per round: the knots the timing follows (``timed``: the NLP's and those added on the arcs) are
-    checked on the straight line in joint space between each two knots, at configurations at most
-    :data:`BETWEEN_STEP_RAD` apart (:func:`_too_close`): where the NLPs' sphere model breaks a row,
+    checked on the timed spline (:func:`timed_between`) between each two knots, at configurations at most
+    :data:`BETWEEN_STEP_RAD` apart (:func:`too_close_between`): where the NLPs' sphere model breaks a row,
     with the exact distances of the verification (:meth:`Environment.check`, coal): below the
     threshold (margin, self margin, and the view cone with ``[view] mode = "path"``), or within
     :data:`BETWEEN_PADDING_M` of it and closer than at the knots, is too close.
@@ -100,7 +101,7 @@ def clear_between_knots(
         return ClearPath(path, warm, nlp, timed_path, timed_knots)
     rounds = 0
     while True:
-        broken, worst = _too_close(cell, timed_knots)
+        broken, worst = too_close_between(cell, timed_knots, timed_path.segments())
         if not broken.any():
             joined = nlp if len(results) == 1 else joined_results(results, theta, knot_cost(cell, theta))
             return ClearPath(path, warm, joined, timed_path, timed_knots)
@@ -155,13 +156,16 @@ def _solve_segment(
         raise CaptureSolverError(_message(segment, worst, error), segment, segment + 1) from error
 
 
-def _too_close(cell: Workcell, knots: Array) -> tuple[NDArray[np.bool_], PairClearance | None]:
-    """(K − 1,) the intervals between the ``knots`` (K, n) that are too close, and the worst such
-    pair (None when there is none). A pair of bodies is too close on an interval when its exact
-    distance between the two knots is below its threshold, or below the threshold plus
+def too_close_between(
+    cell: Workcell, knots: Array, segments: list[slice]
+) -> tuple[NDArray[np.bool_], PairClearance | None]:
+    """(K − 1,) the intervals between the ``knots`` (K, n) of ``cell``'s robot that are too close,
+    and the worst such pair (None when there is none); ``segments`` the slices of the knots the
+    timing follows as one spline each. A pair of bodies is too close on an interval when its exact
+    distance between the two knots (where the timing takes the arm: :func:`timed_between`) is below
+    its threshold, or below the threshold plus
     :data:`BETWEEN_PADDING_M` and below its distance at both knots by more than :data:`DIP_M` (the
-    motion between them comes closer than the knots: the timed spline, not quite the straight line,
-    may come closer still; a pair as close at the knots, a light carried 0.7 mm beyond the self
+    motion between them comes closer than the knots: between the samples it may come closer still; a pair as close at the knots, a light carried 0.7 mm beyond the self
     margin from a link by a joint that does not change it, is not).
 
     Only the intervals where the NLPs' sphere model (:meth:`Environment.sphere_clearance`, whose
@@ -171,7 +175,8 @@ def _too_close(cell: Workcell, knots: Array) -> tuple[NDArray[np.bool_], PairCle
     ~0.05 s."""
     if len(knots) < 2:
         return np.zeros(0, bool), None
-    between = _between(knots)
+    bounds = (cell.limits.lower, cell.limits.upper)
+    between = [b for segment in segments for b in timed_between(knots[segment], bounds)]
     at_knots = _sphere_minima(cell, knots)
     inside = np.split(_sphere_minima(cell, np.vstack(between)), np.cumsum([len(b) for b in between])[:-1])
     worst = [
@@ -198,16 +203,48 @@ def _sphere_minima(cell: Workcell, thetas: Array) -> Array:
     return np.min(np.vstack(values), axis=0) if values else np.full(len(thetas), np.inf)
 
 
-def _between(knots: Array) -> list[Array]:
-    """Per interval between the ``knots`` (K, n), the configurations (c, n) the check looks at, evenly
-    spaced on the straight line strictly between its two knots: c = ⌈Δ / :data:`BETWEEN_STEP_RAD`⌉
-    (Δ the largest joint's step), at least 1, at most :data:`BETWEEN_SAMPLES`."""
-    steps = np.abs(np.diff(knots, axis=0)).max(axis=1)
-    counts = np.clip(np.ceil(steps / BETWEEN_STEP_RAD).astype(int), 1, BETWEEN_SAMPLES)
-    return [
-        q0 + (np.arange(1, c + 1) / (c + 1))[:, None] * (q1 - q0)
-        for q0, q1, c in zip(knots[:-1], knots[1:], counts, strict=True)
-    ]
+def timed_between(knots: Array, bounds: tuple[Array, Array], step: float = BETWEEN_STEP_RAD) -> list[Array]:
+    """Per interval between the waypoints ``knots`` (K, n) (rad) of one timed segment, the
+    configurations (c, n) the timing passes strictly between its two knots: its geometric path, the
+    not-a-knot cubic spline q(s) over the chord parameter through the knots and the midpoints
+    :func:`~optlight.planning.chord.chord_path` adds where it would leave the joint ``bounds``
+    (both timings follow it, docs/design.md §6), at c evenly spaced s, c = ⌈Δ / ``step``⌉ (Δ the
+    largest joint's step), at least 1, at most :data:`BETWEEN_SAMPLES` per spline interval. Not
+    the straight line: the spline swings past it between knots (a Kinova's finger 2.3 mm closer to
+    the object than at a transfer's knots)."""
+    chord = chord_path(knots, bounds)
+    if chord is None:  # no motion: the knot itself
+        return [knots[:1] for _ in range(len(knots) - 1)]
+    s, w = chord
+    spline = CubicSpline(s, w, bc_type="not-a-knot") if len(w) > 2 else None
+    counts = np.clip(np.ceil(np.abs(np.diff(w, axis=0)).max(axis=1) / step).astype(int), 1, BETWEEN_SAMPLES)
+    samples = [s[i] + (np.arange(1, c + 1) / (c + 1)) * (s[i + 1] - s[i]) for i, c in enumerate(counts)]
+    at = _waypoint_of(knots, w)
+    out = []
+    for i in range(len(knots) - 1):
+        where = np.concatenate(samples[at[i] : at[i + 1]] + [s[at[i] + 1 : at[i + 1]]])
+        if where.size == 0:  # a knot merged with its neighbour
+            out.append(knots[i : i + 1])
+        elif spline is None:
+            out.append(w[0] + (where / s[-1])[:, None] * (w[1] - w[0]))
+        else:
+            out.append(np.asarray(spline(np.sort(where))))
+    return out
+
+
+def _waypoint_of(knots: Array, w: Array) -> NDArray[np.int64]:
+    """(K,) the index in the timed waypoints ``w`` of each of the ``knots`` (K, n): ``w`` holds every
+    knot in order, the midpoints chord_path added between them, and not the knots it merged with
+    the one before (those get the index of that one); the last knot is the last waypoint."""
+    at, j = np.zeros(len(knots), np.int64), 0
+    for i, q in enumerate(knots):
+        for k in range(j, len(w)):
+            if np.array_equal(w[k], q):
+                j = k
+                break
+        at[i] = j
+    at[-1] = len(w) - 1
+    return at
 
 
 def _check(cell: Workcell, thetas: Array) -> EnvironmentReport:
@@ -224,7 +261,7 @@ def _padded(pair: PairClearance) -> bool:
 
 def _closer_between(between: EnvironmentReport, ends: EnvironmentReport) -> PairClearance | None:
     """The pair of ``between`` (an interval's samples between its knots) farthest below its threshold
-    among those too close there (:func:`_too_close`; ``ends`` the check at the two knots); None when
+    among those too close there (:func:`too_close_between`; ``ends`` the check at the two knots); None when
     no pair is."""
     at_knots = {(p.kind, p.first, p.second): p.min_distance_m for p in ends.pairs if p.time_s is not None}
     close = [

@@ -17,12 +17,18 @@ from optlight.planning.nlp import (
     selected_rows,
 )
 from optlight.planning.trajectory.active_rows import rows_of, solve_active_rows
+from optlight.planning.trajectory.between import too_close_between
 from optlight.planning.trajectory.optimizer import Array
+from optlight.robot.kinematics import PRISMATIC_JOINTS
 from optlight.spec import SolverSpec
 from optlight.workcell import Workcell
 
 #: Knots of a transfer (start → first landmark, last landmark → start) at most this far apart (rad).
 TRANSFER_STEP = 0.1
+
+#: Rounds of transfers planned with their knots' step halved where the arm comes too close between
+#: two knots (:func:`plan_transfer`).
+TRANSFER_ROUNDS = 4
 
 #: Clearance (m) a transfer keeps at its interior knots beyond the environment's margins: the arm
 #: moves between knots, and its ends may sit exactly at a margin (a capture planned against it).
@@ -35,23 +41,57 @@ def plan_transfer(
     """Joint angles (K, n) of ``cell``'s robot from ``start`` to ``goal`` (rad), both included: the
     light is off the sphere here, moving to or from the captures (IPOPT's settings from ``solver``).
 
-    The straight line in joint space, knots at most :data:`TRANSFER_STEP` apart per joint, when it
-    keeps clear of the environment (collisions; and the view, ``[view] mode = "path"``, not the beam:
-    the light is not aimed at the object here) at every knot,
-    by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
+    The knots of :func:`_transfer_knots`, at most :data:`TRANSFER_STEP` apart per joint, then checked
+    where the timing takes the arm between them (the spline through them, exactly, as the
+    verification: :func:`~optlight.planning.trajectory.between.too_close_between`): where it comes
+    too close between two knots, the step halves and the transfer is planned again (denser knots
+    carry the clearance rows closer together), at most :data:`TRANSFER_ROUNDS` times. Raises
+    :class:`SolverError` naming the link and the obstacle when no transfer clears."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    environment = cell.environment
+    if environment is None or not (environment.collisions or environment.view_mode == "path"):
+        return _line(start, goal, TRANSFER_STEP)
+    step, worst = TRANSFER_STEP, None
+    for _ in range(TRANSFER_ROUNDS):
+        knots = _transfer_knots(cell, solver, start, goal, detour, step)
+        broken, worst = too_close_between(cell, knots, [slice(0, len(knots))])
+        if not broken.any():
+            return knots
+        step /= 2
+    assert worst is not None
+    raise SolverError(
+        f"no transfer clear of the environment between the start configuration and the captures: "
+        f"{worst.first} comes {worst.min_distance_m * 1e3:.1f} mm from {worst.second} (allowed "
+        f"{worst.threshold_m * 1e3:.1f} mm) between its knots, {TRANSFER_ROUNDS} times denser; choose "
+        "another [robot] start"
+    )
+
+
+def _line(start: Array, goal: Array, step: float) -> Array:
+    """The straight line in joint space from ``start`` to ``goal`` (rad), both included, its knots at
+    most ``step`` apart per joint."""
+    count = max(2, int(np.ceil(np.max(np.abs(goal - start)) / step)) + 1)
+    return start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)
+
+
+def _transfer_knots(
+    cell: Workcell, solver: SolverSpec, start: Array, goal: Array, detour: Array | None, step: float
+) -> Array:
+    """The knots (K, n) of :func:`plan_transfer` at most ``step`` apart per joint, clear at each knot.
+
+    The straight line in joint space when it keeps clear of the environment (collisions; and the
+    view, ``[view] mode = "path"``, not the beam: the light is not aimed at the object here) at
+    every knot, by the NLPs' sphere model; otherwise the transfer NLP from that line: min Σ_k Σ_j W_j
     (θ_{k+1,j} − θ_{k,j})² (W = 1/v_max², the squared time at the velocity limits) s.t. the rows ≥
     :data:`TRANSFER_PADDING` at the interior knots, joint limits and the end points fixed, with the
     clearance rows that can bind (:func:`solve_active_rows`, as the trajectory NLP: with all 229 rows
     per knot the exact Hessian made table_wall's two transfers 2.1 s). When the NLP fails from the line (a line deep in an obstacle can leave IPOPT in a local infeasibility), it
     starts again from ``detour`` (K', n), a known clear way from ``start`` to ``goal`` (the way back
     along the plan), which it shortens. Raises :class:`SolverError` when that fails too."""
-    start, goal = np.asarray(start, float), np.asarray(goal, float)
-    count = max(2, int(np.ceil(np.max(np.abs(goal - start)) / TRANSFER_STEP)) + 1)
-    line = start + np.linspace(0.0, 1.0, count)[:, None] * (goal - start)
+    line = _line(start, goal, step)
     environment = cell.environment
-    view = environment is not None and environment.view_mode == "path"
-    if environment is None or not (environment.collisions or view):
-        return line
+    assert environment is not None
+    view = environment.view_mode == "path"
     robot = cell.robot
 
     def rows(theta: Array) -> Array:
@@ -78,7 +118,7 @@ def plan_transfer(
         return (knots, status), knots
 
     status = ""
-    for initial in (line, None if detour is None else _thinned(np.asarray(detour, float), TRANSFER_STEP)):
+    for initial in (line, None if detour is None else _thinned(np.asarray(detour, float), step)):
         if initial is None or len(initial) < 3:
             continue
         knots, status = solve_active_rows(cell, initial[1:-1], solve, bound=TRANSFER_PADDING - 1e-8)
@@ -141,3 +181,30 @@ def _thinned(knots: Array, step: float) -> Array:
 #: Largest distance (m) the timed path's light may stray from the planned path (the polyline of the
 #: knots' lights) between two knots of a segment on the sphere before a knot is added there: half the
 #: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`, 5 mm; the planner does not
+
+
+def whole_turns(cell: Workcell, start: Array, knots: Array, back: bool) -> Array:
+    """(n,) the multiples of 2π (rad) to add to each revolute joint of ``cell``'s robot at every one
+    of the plan's ``knots`` (K, n) so that its transfers from ``start`` (rad) to the first knot and,
+    with ``back``, from the last knot are shortest, every knot staying within the joint limits: per
+    joint, the whole k minimising |θ_0 + 2πk − s| (+ |θ_{K−1} + 2πk − s|), k = 0 on a tie.
+
+    A revolute joint at θ and at θ + 2π is one posture: the light, the clearances and the view of
+    every knot are unchanged, only the way the transfers turn. The trajectory NLP and the IK place
+    a capture at any turn within the limits (a UR3's shoulder_lift at 3.08 rad is 4.65 rad from the
+    start's −1.57 through the table below the shoulder, and 1.63 rad from it at −3.20 rad, over the
+    top)."""
+    lower, upper = cell.limits.lower, cell.limits.upper
+    revolute = np.array([kind not in PRISMATIC_JOINTS for kind in cell.robot.joint_kinds])
+    ends = knots[[0, -1]] if back else knots[:1]
+    turns = np.zeros(cell.robot.n)
+    for j in np.flatnonzero(revolute):
+        low = int(np.ceil((lower[j] - knots[:, j].min()) / (2 * np.pi) - 1e-12))
+        high = int(np.floor((upper[j] - knots[:, j].max()) / (2 * np.pi) + 1e-12))
+        options = list(range(low, high + 1))
+        if 0 not in options:  # a knot beyond the limits: the verification reports it
+            continue
+        cost = [float(np.abs(ends[:, j] + 2 * np.pi * k - start[j]).sum()) for k in options]
+        if cost[options.index(0)] > min(cost) + 1e-9:
+            turns[j] = 2 * np.pi * options[int(np.argmin(cost))]
+    return turns
