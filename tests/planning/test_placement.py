@@ -439,3 +439,26 @@ def test_a_landmark_out_of_reach_is_placed_from_a_clear_posture_found_along_its_
     np.testing.assert_allclose(position, sphere.position(fourth.zenith, fourth.azimuth), atol=1e-6)
     assert setup.environment is not None
     assert setup.environment.worst_sphere_row(setup.robot, placed.thetas[4])[0] >= 0.0
+
+
+def test_from_a_posture_clear_of_the_beam_the_placement_with_the_beams_rows_keeps_the_arm_out_of_it() -> None:
+    """Default layout (view cone and beam on), 96² camera: at azimuth 315° the reacher holds the
+    light clear only near zenith 60°. From that posture the placement NLP without the beam's rows
+    (they are left to the check of its result) goes to ~54°, with the upper arm 32 mm inside the beam,
+    and the check refuses it (a camera-loop re-plan failed there); with them it stays out: a success,
+    its light on the sphere and the azimuth (pinocchio), every row of the sphere model ≥ 0."""
+    setup = Setup.from_problem(reduced_problem(camera_px=96, landmarks={"count": 8}))
+    reacher, sphere, robot = reacher_of(setup), setup.sphere, setup.robot
+    azimuth = math.radians(315.0)
+    start = reacher.attempt(sphere.position(math.radians(60.0), azimuth), robot.theta_ref).theta
+    assert start is not None
+    without = reacher.placement.solve(azimuth, start)
+    assert not without.success and not without.clear
+    assert "beam" in without.clearance_row and without.min_clearance_m < -0.01
+    beam = reacher.placement.solve(azimuth, start, beam=True)
+    assert beam.success and beam.clear
+    position, rotation = robot.light_pose(beam.theta)
+    assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < 1e-8
+    assert sphere.angles(position)[1] == pytest.approx(azimuth, abs=1e-6)
+    assert setup.environment is not None
+    assert setup.environment.worst_sphere_row(robot, beam.theta)[0] >= 0.0
