@@ -324,7 +324,8 @@ class LightPlacement:
         if on_boundary:
             message = f"on the reach boundary (σ_min/σ_max = {conditioning:.1e}, IPOPT: {status})"
         elif not converged:
-            message = f"IPOPT: {status}, |h| = {h:.1e} m"
+            # a feasible iterate is still a light the robot holds clear (PlacementResult.clear)
+            message = f"IPOPT: {status}, |h| = {h:.1e} m" + (", its light clear" if feasible else "")
         elif not clear:
             message = f"IPOPT: {status}, but {row} is {-clearance * 1e3:.1f} mm too close"
         elif not feasible:
