@@ -32,9 +32,9 @@ from numpy.typing import NDArray
 from optlight.environment import CAPTURE_SLACK
 from optlight.errors import IPOPT_ITERATION_LIMIT, OutOfReachError
 from optlight.planning.jerk import rest_to_rest_duration
-from optlight.planning.landmarks import Landmark, zenith_grid
+from optlight.planning.landmarks import Landmark, exact_cost, zenith_grid
 from optlight.planning.path import LightPath, azimuth_order, shortest_open_tour
-from optlight.planning.placement import ClearPosture, LightPlacement
+from optlight.planning.placement import ClearPosture, LightPlacement, PlacementResult
 from optlight.robot import IKResult, Robot, generalized_ik
 from optlight.spec import LandmarksSpec, SolverSpec, TrajectorySpec
 from optlight.workcell import ImageCosts, MotionLimits, Workcell
@@ -225,6 +225,18 @@ def too_close_mm(clearance: float) -> float:
     return (CAPTURE_SLACK - clearance) * 1e3
 
 
+def _cheapest_clear(tried: Sequence[PlacementResult]) -> PlacementResult | None:
+    """The cheapest success among the placement NLP's results ``tried``; without one, the cheapest
+    whose light is clear all the same (:attr:`PlacementResult.clear`: IPOPT stopped at its iteration
+    limit on a light the robot holds clear); None when no light is. Found through the camera loop: a
+    re-plan's landmark at azimuth 315°, where every start's solve stopped at its iteration limit at
+    zenith 25.0°, clear, the light the previous round had placed there."""
+    for usable in ([r for r in tried if r.success], [r for r in tried if r.clear]):
+        if usable:
+            return min(usable, key=lambda r: r.cost)
+    return None
+
+
 #: Zenith spacing (rad, 5°) of the lights on a landmark's azimuth the reacher tries when the
 #: placement NLP fails from every start (:class:`AzimuthPlacement`).
 SCAN_STEP = math.radians(5.0)
@@ -242,9 +254,13 @@ class AzimuthPlacement:
     (cost 0.029, the arm in the light's beam, so the re-plan failed verification) where another
     start gave 26.4° (cost 0.0084).
 
-    When it fails from all three, the lights on the azimuth :data:`SCAN_STEP` apart, nearest the
-    landmark's zenith first, are tried by the reacher from the previous capture's angles, and the
-    NLP starts again from the first clear posture found. Found through the camera loop: a re-plan
+    Where no start succeeds, the cheapest light a start's solve stopped at clear all the same (at
+    IPOPT's iteration limit, :func:`_cheapest_clear`). Where none is clear, the lights on the azimuth
+    :data:`SCAN_STEP` apart, nearest the landmark's zenith first, are tried by the reacher from the
+    previous capture's angles, and the NLP starts again from each clear posture found (with the
+    beam's rows when its optimum without them is in the beam, :meth:`_from_clear`) until it
+    succeeds; the cheapest clear light of those solves is kept, and failing all of them, the first
+    clear posture's light itself (:meth:`_at_clear`). Found through the camera loop: a re-plan
     moved a landmark from zenith 53.6°, where the robot had reached it clear, to 60°, out of reach;
     the NLP from the IK's unconverged angles and from the previous capture's found the azimuth
     infeasible."""
@@ -259,27 +275,33 @@ class AzimuthPlacement:
         # the previous capture's clear angles last: where the IK failed, its angles can lie far
         # from any posture that holds the light on the sphere, and the NLP fails from them
         starts = [a.ik.theta for a in attempts] + [previous]
-        placed = placement.solve(lm.azimuth, starts[0])
+        tried = [placement.solve(lm.azimuth, starts[0])]
         for start in starts[1:]:
-            if placed.success and not placed.on_boundary:
+            done = [r for r in tried if r.success]
+            if done and not min(done, key=lambda r: r.cost).on_boundary:
                 break
-            other = placement.solve(lm.azimuth, start)
-            if other.success and (not placed.success or other.cost < placed.cost):
-                placed = other
-        if not placed.success:
+            tried.append(placement.solve(lm.azimuth, start))
+        placed = _cheapest_clear(tried)
+        nearest_clear: Array | None = None
+        if placed is None:
             for theta in self._clear_on_azimuth(lm, previous):
-                placed = placement.solve(lm.azimuth, theta)
-                if placed.success:
+                nearest_clear = theta if nearest_clear is None else nearest_clear
+                tried += self._from_clear(lm, theta)
+                if tried[-1].success:
                     break
+            placed = _cheapest_clear(tried)
         cell = self.reacher.cell
         sphere = cell.sphere
-        if not placed.success:
+        if placed is None and nearest_clear is not None:
+            return self._at_clear(lm, attempts[0], nearest_clear, tried[-1].message)
+        if placed is None:
+            last = tried[-1]
             clear_of = " clear of the environment" if cell.environment is not None else ""
             return (
                 f"nor is any light on its azimuth{clear_of} within zenith "
                 f"{np.rad2deg(sphere.zenith_min):.1f}–{np.rad2deg(sphere.zenith_max):.1f}° "
-                f"(placement NLP: {placed.message}"
-                f"{ITERATION_LIMIT_HINT if placed.status == IPOPT_ITERATION_LIMIT else ''})"
+                f"(placement NLP: {last.message}"
+                f"{ITERATION_LIMIT_HINT if last.status == IPOPT_ITERATION_LIMIT else ''})"
             )
         moved = replace(
             lm,
@@ -299,6 +321,37 @@ class AzimuthPlacement:
         )
         note = f"{how} {why_moved(cell.robot, attempts[0])} (cost {lm.cost:.3g} -> {placed.cost:.3g}; {placed.message})"
         return moved, placed.theta, note
+
+    def _from_clear(self, lm: Landmark, theta: Array) -> list[PlacementResult]:
+        """The placement NLP on ``lm``'s azimuth from the clear posture ``theta``, then, failing
+        that, with the beam's rows: without them its optimum can put the arm in the light's beam
+        (the check of the result refuses it), and from a posture clear of the beam the NLP holding
+        them keeps it out. Found through the camera loop: a re-plan's landmark at azimuth 315°,
+        whose only clear posture from the previous capture's was at zenith 60°, from where the NLP
+        went to 54° with the arm's upper link 32 mm inside the beam."""
+        placed = self.reacher.placement.solve(lm.azimuth, theta)
+        if placed.success:
+            return [placed]
+        return [placed, self.reacher.placement.solve(lm.azimuth, theta, beam=True)]
+
+    def _at_clear(
+        self, lm: Landmark, best: Attempt, theta: Array, message: str
+    ) -> tuple[Landmark, Array, str]:
+        """``lm`` replaced by the light at the clear posture ``theta`` (on its azimuth, the clear
+        light nearest its zenith, :meth:`_clear_on_azimuth`), where the placement NLP found no better
+        light clear from it (``message``, its last attempt)."""
+        cell = self.reacher.cell
+        placement = self.reacher.placement
+        position = cell.robot.light_pose(theta)[0]
+        zenith = float(cell.sphere.angles(position)[0])
+        cost = exact_cost(placement.scene, placement.objective, position)
+        moved = replace(lm, zenith=zenith, position=position, cost=cost, status="placed", solver_status="")
+        note = (
+            f"moved from zenith {np.rad2deg(lm.zenith):.1f}° to {np.rad2deg(zenith):.1f}°, the nearest "
+            f"clear light on its azimuth, {why_moved(cell.robot, best)} (cost {lm.cost:.3g} -> {cost:.3g}; "
+            f"placement NLP: {message})"
+        )
+        return moved, theta, note
 
     def _clear_on_azimuth(self, lm: Landmark, previous: Array) -> Iterator[Array]:
         """Clear joint angles holding a light on ``lm``'s azimuth (the reacher from ``previous``,

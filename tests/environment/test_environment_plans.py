@@ -488,11 +488,11 @@ def test_a_placement_from_the_near_rows_is_the_one_from_every_row() -> None:
     lbg, ubg = placement._bounds["fixed"]
     near = placement._run(ik.theta, p, lbg, ubg)
     assert near.success
-    row_sets = [key for key in placement._solvers if key is not None]
+    row_sets = [key for key, _ in placement._solvers if key is not None]
     rows = len(env.clearance_labels(robot))
     assert row_sets and all(len(key) < rows / 2 for key in row_sets)
 
-    nlp, n_env = placement._solver(None)
+    nlp, n_env = placement._solver(None, False)
     assert n_env == rows + len(env.view_labels(robot, beam=False))  # the beam: checked on the result
     full_lbg, full_ubg = np.r_[lbg, np.full(n_env, CAPTURE_SLACK)], np.r_[ubg, np.full(n_env, np.inf)]
     every = placement._margined(nlp, ik.theta, p, full_lbg, full_ubg, relax=True)

@@ -439,3 +439,65 @@ def test_a_landmark_out_of_reach_is_placed_from_a_clear_posture_found_along_its_
     np.testing.assert_allclose(position, sphere.position(fourth.zenith, fourth.azimuth), atol=1e-6)
     assert setup.environment is not None
     assert setup.environment.worst_sphere_row(setup.robot, placed.thetas[4])[0] >= 0.0
+
+
+def test_from_a_posture_clear_of_the_beam_the_placement_with_the_beams_rows_keeps_the_arm_out_of_it() -> None:
+    """Default layout (view cone and beam on), 96² camera: at azimuth 315° the reacher holds the
+    light clear only near zenith 60°. From that posture the placement NLP without the beam's rows
+    (they are left to the check of its result) goes to ~54°, with the upper arm 32 mm inside the beam,
+    and the check refuses it (a camera-loop re-plan failed there); with them it stays out: a success,
+    its light on the sphere and the azimuth (pinocchio), every row of the sphere model ≥ 0."""
+    setup = Setup.from_problem(reduced_problem(camera_px=96, landmarks={"count": 8}))
+    reacher, sphere, robot = reacher_of(setup), setup.sphere, setup.robot
+    azimuth = math.radians(315.0)
+    start = reacher.attempt(sphere.position(math.radians(60.0), azimuth), robot.theta_ref).theta
+    assert start is not None
+    without = reacher.placement.solve(azimuth, start)
+    assert not without.success and not without.clear
+    assert "beam" in without.clearance_row and without.min_clearance_m < -0.01
+    beam = reacher.placement.solve(azimuth, start, beam=True)
+    assert beam.success and beam.clear
+    position, rotation = robot.light_pose(beam.theta)
+    assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < 1e-8
+    assert sphere.angles(position)[1] == pytest.approx(azimuth, abs=1e-6)
+    assert setup.environment is not None
+    assert setup.environment.worst_sphere_row(robot, beam.theta)[0] >= 0.0
+
+
+def test_where_the_placement_nlp_finds_nothing_clear_the_scans_nearest_clear_light_is_kept(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Default layout, 96² camera: a landmark at zenith 30°, azimuth 315° is in the camera's view (the
+    upper arm blocks it), and the scan of its azimuth from the previous capture's posture (zenith 28°,
+    azimuth 270°) finds clear postures. With every solve of the placement NLP imposed to fail (no
+    success, no clear light), the scan's first clear light itself is kept, with a warning: its posture
+    holds it on the azimuth (pinocchio), every row ≥ 0."""
+    from optlight.planning.landmarks import Landmark, zenith_grid
+    from optlight.planning.policy import SCAN_STEP
+
+    setup = Setup.from_problem(reduced_problem(camera_px=96, landmarks={"count": 8}))
+    reacher, sphere, robot = reacher_of(setup), setup.sphere, setup.robot
+    solve = reacher.placement.solve
+
+    def failing(azimuth: float | None, theta0: Any, **kwargs: Any) -> PlacementResult:
+        return dataclasses.replace(solve(azimuth, theta0, **kwargs), success=False, min_clearance_m=-1.0)
+
+    monkeypatch.setattr(reacher.placement, "solve", failing)
+    lights = [(math.radians(28.0), math.radians(270.0)), (math.radians(30.0), math.radians(315.0))]
+    landmarks = [
+        Landmark(i, z, a, sphere.position(z, a), 0.01, "refined", "", 0, 0.0) for i, (z, a) in enumerate(lights)
+    ]
+    placed = place_landmarks(reacher, setup.landmark_spec, landmarks)
+    kept, azimuth = placed.landmarks[1], lights[1][1]
+    assert placed.landmarks[0].status == "refined"  # reached as it is: the scan starts from its posture
+    assert kept.status == "placed" and kept.zenith != pytest.approx(lights[1][0])
+    # a light of the scan's grid (5° apart), not one an NLP solve moved
+    assert np.min(np.abs(zenith_grid(sphere, SCAN_STEP) - kept.zenith)) < 1e-6
+    assert "nearest clear light on its azimuth" in placed.warnings[0]
+    position, rotation = robot.light_pose(placed.thetas[1])
+    assert np.abs(h_residual(position, rotation, sphere.center, sphere.radius)).max() < 1e-8
+    assert sphere.angles(position)[1] == pytest.approx(azimuth, abs=1e-6)
+    np.testing.assert_allclose(position, kept.position, atol=1e-9)
+    assert kept.cost == pytest.approx(exact_cost(setup.scene, setup.objective, position))
+    assert setup.environment is not None
+    assert setup.environment.worst_sphere_row(robot, placed.thetas[1])[0] >= 0.0

@@ -23,7 +23,8 @@ class Landmark:
     ``status``: "refined" when a refinement's solution won, "polished" when the camera-resolution
     polish did, "sweep" when a sweep sample did; "placed" when the robot could not reach the search's
     landmark and the joint-space placement (:mod:`optlight.planning.placement`) moved it along its
-    azimuth to the best light the robot reaches.
+    azimuth to the best light the robot reaches (where that NLP finds none clear of the environment,
+    to the clear light nearest it on the azimuth).
     ``solver_status``: the return status of the winning solve (IPOPT's in free mode, "converged" or
     scipy's message for the zenith search of azimuth mode; of the first solve when the sweep won; ""
     when no solve ran). ``iterations``: over all solves of this landmark, IPOPT iterations (free

@@ -101,6 +101,17 @@ class PlacementResult:
     clearance_row: str
     time_s: float
 
+    @property
+    def clear(self) -> bool:
+        """The light is one the robot holds at ``theta``, whether or not IPOPT converged there (an
+        iterate at its iteration limit): |h|∞ ≤ :data:`H_TOL`, the environment's rows ≥
+        −:data:`CLEARANCE_TOL` and off the reach boundary (σ_min/σ_max ≥ :data:`SINGULAR_TOL`)."""
+        return (
+            self.max_h_residual <= H_TOL
+            and self.min_clearance_m >= -CLEARANCE_TOL
+            and self.conditioning >= SINGULAR_TOL
+        )
+
 
 class LightPlacement:
     """The joint-space placement NLP of ``cell``'s robot on its sphere (see the module docstring):
@@ -156,7 +167,7 @@ class LightPlacement:
         self._theta, self._p = theta, p
         self._cost = self.cost_function(theta, p[1:])
         self._light = [light_rows(a, rot, sphere.center, sphere.radius), plane, side, u[2]]
-        self._solvers: OrderedDict[tuple[int, ...] | None, tuple[ca.Function, int]] = OrderedDict()
+        self._solvers: OrderedDict[tuple[tuple[int, ...] | None, bool], tuple[ca.Function, int]] = OrderedDict()
         # g = [h (3), plane, side, u_z, c, v]; "free" switches the two azimuth rows off through their
         # bounds; the environment rows are ≥ 0.
         # A zenith bound at the pole (θ_min = 0, θ_max = π) is implied by h = 0 and dropped: u_z ≤ 1 is
@@ -168,21 +179,23 @@ class LightPlacement:
             "free": (np.r_[0.0, 0.0, 0.0, -np.inf, -np.inf, lo], np.r_[0.0, 0.0, 0.0, np.inf, np.inf, hi]),
         }
 
-    def _solver(self, active: NDArray[np.bool_] | None) -> tuple[ca.Function, int]:
+    def _solver(self, active: NDArray[np.bool_] | None, beam: bool) -> tuple[ca.Function, int]:
         """The NLP with the clearance rows ``active`` ((1, m) over the environment's clearance rows;
-        None: all of them) and the view rows, and its number of environment rows: built on first
-        use (~5 ms, the objective's graph shared), the :data:`SOLVERS_KEPT` last used kept."""
-        key = None if active is None else tuple(int(i) for i in np.flatnonzero(active[0]))
+        None: all of them) and the view rows (with ``beam``, the beam's rows too), and its number of
+        environment rows: built on first use (~5 ms, the objective's graph shared), the
+        :data:`SOLVERS_KEPT` last used kept."""
+        key = (None if active is None else tuple(int(i) for i in np.flatnonzero(active[0])), beam)
         if key not in self._solvers:
             rows, env, theta = list(self._light), self.environment, self._theta
             if env is not None and env.collisions:
                 clearance = env.clearance_function(self.robot)
                 rows.append(clearance(theta) if active is None else selected_rows(clearance, theta, [0], 0, active)[0])
             if env is not None and env.view_cone is not None:
-                # the beam's rows are left to the check of the result (worst_sphere_row) and the
-                # clear posture: started from the IK's posture of a light out of reach, the arm
-                # stretched through the beam, IPOPT reported the placement infeasible (point_light)
-                rows.append(env.view_cone_function(self.robot, beam=False)(theta))
+                # the beam's rows only when asked (from a clear posture): left to the check of the
+                # result (worst_sphere_row), started from the IK's posture of a light out of reach,
+                # the arm stretched through the beam, IPOPT reported the placement infeasible
+                # (point_light)
+                rows.append(env.view_cone_function(self.robot, beam=beam)(theta))
             g = ca.vertcat(*rows)
             nlp = ca.nlpsol("light_placement", "ipopt", {"x": theta, "p": self._p, "f": self._cost, "g": g}, self._options)
             self._solvers[key] = (nlp, g.size1() - (ZENITH_ROW + 1))
@@ -191,11 +204,13 @@ class LightPlacement:
         self._solvers.move_to_end(key)
         return self._solvers[key]
 
-    def solve(self, azimuth: float | None, theta0: ArrayLike) -> PlacementResult:
+    def solve(self, azimuth: float | None, theta0: ArrayLike, *, beam: bool = False) -> PlacementResult:
         """The best light on the half-plane of ``azimuth`` (rad; None: anywhere on the allowed cap)
         that the robot reaches, IPOPT warm-started at ``theta0`` (n, rad): a local optimum, the one
-        ``theta0`` leads to, kept off the reach boundary. Never raises for an unreachable azimuth:
-        returns ``success=False`` and says why in ``message``."""
+        ``theta0`` leads to, kept off the reach boundary. With ``beam`` the arm's distance to the
+        light's beam is a row of the NLP too (otherwise only the check of the result holds it): for
+        a start clear of it, where the optimum without it puts the arm in the beam. Never raises for
+        an unreachable azimuth: returns ``success=False`` and says why in ``message``."""
         t0 = time.perf_counter()
         lbg, ubg = self._bounds["free" if azimuth is None else "fixed"]
         phi = 0.0 if azimuth is None else float(azimuth)
@@ -204,7 +219,7 @@ class LightPlacement:
         best: PlacementResult | None = None
         iterations = 0
         for _ in range(VISIBILITY_ROUNDS):
-            solved = self._run(theta, np.r_[phi, mask], lbg, ubg)
+            solved = self._run(theta, np.r_[phi, mask], lbg, ubg, beam=beam)
             iterations += solved.iterations
             candidate = self._result(solved.x, solved.success, solved.status)
             # a failed re-solve never replaces a success; among successes the lower cost wins
@@ -218,22 +233,24 @@ class LightPlacement:
             theta, mask = solved.x, new_mask
         assert best is not None  # VISIBILITY_ROUNDS ≥ 1
         if best.on_boundary:
-            best, more = self._step_inside(best, best.azimuth if azimuth is None else phi)
+            best, more = self._step_inside(best, best.azimuth if azimuth is None else phi, beam)
             iterations += more
         return dataclasses.replace(best, iterations=iterations, time_s=time.perf_counter() - t0)
 
-    def _run(self, theta0: Array, p: Array, lbg: Array, ubg: Array, *, relax: bool = True) -> Solve:
+    def _run(
+        self, theta0: Array, p: Array, lbg: Array, ubg: Array, *, relax: bool = True, beam: bool = False
+    ) -> Solve:
         """The NLP from ``theta0`` with the bounds ``lbg``, ``ubg`` of its first :data:`ZENITH_ROW` + 1
         rows and the clearance rows that can bind (:func:`~optlight.planning.trajectory.solve_active_rows`,
         one posture: those below :data:`~optlight.planning.trajectory.ACTIVE_DISTANCE` at ``theta0``,
         more when the solution breaks one left out, all in the last solve), with the iterations of
         every solve. IPOPT's time per iteration grows with the rows (L-BFGS over ~230 of them on the
         scaling benchmark's obstacles, of which ~26 are near a posture). Each solve is
-        :meth:`_margined`'s (``relax``: with its fallbacks)."""
+        :meth:`_margined`'s (``relax``: with its fallbacks; ``beam``: with the beam's rows)."""
         solves: list[Solve] = []
 
         def attempt(active: NDArray[np.bool_] | None, start: Array) -> tuple[Solve, Array | None]:
-            nlp, rows = self._solver(active)
+            nlp, rows = self._solver(active, beam)
             full_lbg = np.r_[lbg, np.full(rows, CAPTURE_SLACK)]
             full_ubg = np.r_[ubg, np.full(rows, np.inf)]
             solves.append(self._margined(nlp, start[0], p, full_lbg, full_ubg, relax))
@@ -307,7 +324,8 @@ class LightPlacement:
         if on_boundary:
             message = f"on the reach boundary (σ_min/σ_max = {conditioning:.1e}, IPOPT: {status})"
         elif not converged:
-            message = f"IPOPT: {status}, |h| = {h:.1e} m"
+            # a feasible iterate is still a light the robot holds clear (PlacementResult.clear)
+            message = f"IPOPT: {status}, |h| = {h:.1e} m" + (", its light clear" if feasible else "")
         elif not clear:
             message = f"IPOPT: {status}, but {row} is {-clearance * 1e3:.1f} mm too close"
         elif not feasible:
@@ -332,7 +350,7 @@ class LightPlacement:
             time_s=0.0,
         )
 
-    def _step_inside(self, boundary: PlacementResult, azimuth: float) -> tuple[PlacementResult, int]:
+    def _step_inside(self, boundary: PlacementResult, azimuth: float, beam: bool) -> tuple[PlacementResult, int]:
         """The light :data:`BOUNDARY_MARGIN` from ``boundary`` along the meridian of ``azimuth`` (rad),
         on the side where the generalized IK (the problem's settings, from ``boundary.theta``, no
         restarts) reaches it and the NLP, with the zenith pinned there through its row's bounds and
@@ -351,7 +369,7 @@ class LightPlacement:
             if not ik.success:
                 continue
             lbg[ZENITH_ROW] = ubg[ZENITH_ROW] = math.cos(zenith)
-            solved = self._run(ik.theta, np.r_[azimuth, lit], lbg, ubg, relax=False)
+            solved = self._run(ik.theta, np.r_[azimuth, lit], lbg, ubg, relax=False, beam=beam)
             iterations += solved.iterations
             inside.append(self._result(solved.x, solved.success, solved.status))
         inside = [r for r in inside if r.success]
