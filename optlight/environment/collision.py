@@ -19,8 +19,8 @@ Bodies are the URDF links (all geometry objects of one link) plus "light". Pairs
 - ``self``: body pairs on different joints that are not adjacent (one joint the parent of the other),
   not disabled by the robot's SRDF, and not already in contact at the reference configuration θ_ref
   (touching by design, as MoveIt's "Default"); threshold ``self_margin``. A pair whose relative pose
-  depends on at most :data:`NEVER_JOINTS` joints and that stays beyond ``self_margin`` at every angle
-  of those joints (:meth:`CollisionModel._never_close`, as MoveIt's "Never") is checked exactly but
+  depends on at most :data:`~optlight.environment.never_close.NEVER_JOINTS` joints and that stays beyond ``self_margin`` at every angle
+  of those joints (:func:`~optlight.environment.never_close.never_close_pairs`, as MoveIt's "Never") is checked exactly but
   gets no sphere rows: the lamp's housing next to a UR's first wrist link, 17 mm apart at the
   closest, is within the margin for the two spheres that cover them at every posture;
 - ``view``: every moving body × the view cone, threshold 0 (the cone's margin is in its angle).
@@ -33,7 +33,6 @@ bound of its first joint's origin and sd is 1-Lipschitz), and all sphere pairs o
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -44,7 +43,7 @@ import pinocchio as pin
 import trimesh
 from numpy.typing import NDArray
 
-from optlight.cache import cached_arrays
+from optlight.environment.never_close import never_close_pairs, ordered_pair
 from optlight.environment.shapes import SMOOTHING_M, HalfSpace, Obstacle, ViewCone
 from optlight.environment.spheres import BodySpheres, RobotSpheres, fit_spheres
 from optlight.errors import RobotError
@@ -61,13 +60,6 @@ PairKind = Literal["obstacle", "self", "view"]
 #: reference is still a capture posture (with 1 mm, a UR5 over a table at its base's height had no
 #: light clear: its upper arm's sphere keeps about the same height at every angle).
 REFERENCE_SLACK_M = 0.005
-#: Self pairs whose relative pose depends on at most this many joints are swept over those joints for
-#: a margin they can never break (:meth:`CollisionModel._never_close`).
-NEVER_JOINTS = 2
-#: Finest box width (deg) of that sweep's branch and bound: a pair it has not decided then may come close.
-NEVER_STEP_DEG = 0.5
-#: Changed whenever what :meth:`CollisionModel._never_close` computes changes (its disk cache).
-_NEVER_VERSION = 1
 #: Sphere–obstacle rows are kept when the sphere can come this close beyond the margin (m).
 PRUNE_SLACK_M = 0.05
 #: Name of the light housing body.
@@ -197,7 +189,7 @@ class CollisionModel:
         touching, exact_ref = self._touching_at_reference(candidates, body_of)
         self.pairs = self._collision_pairs(n_robot, candidates, touching, obstacle_ids, cone_id, body_of)
         self.motion_weights = self._motion_weights(n_robot)
-        self.never_close_pairs = self._never_close(body_of, surfaces)
+        self.never_close_pairs = never_close_pairs(self, body_of, surfaces)
         self._sphere_rows(surfaces, max_spheres, obstacle_ids, body_of, exact_ref)
 
     # ------------------------------------------------------------------ builders (in __init__'s order)
@@ -296,7 +288,7 @@ class CollisionModel:
         touching = {pair for pair, d in reference.items() if d <= 0.0}
         exact_ref: dict[tuple[str, str], float] = {}
         for (a, b), d in reference.items():
-            pair = _ordered(body_of[a].name, body_of[b].name)
+            pair = ordered_pair(body_of[a].name, body_of[b].name)
             exact_ref[pair] = min(exact_ref.get(pair, np.inf), d)
         self.ignored_self_pairs = tuple(sorted({(body_of[a].name, body_of[b].name) for a, b in touching}))
         return touching, exact_ref
@@ -363,7 +355,7 @@ class CollisionModel:
             {
                 tuple(sorted((body_index[p.first_body], body_index[p.second_name])))
                 for p in self.pairs
-                if p.kind == "self" and _ordered(p.first_body, p.second_name) not in self.never_close_pairs
+                if p.kind == "self" and ordered_pair(p.first_body, p.second_name) not in self.never_close_pairs
             }
         )
         sb = self.spheres.body
@@ -415,7 +407,7 @@ class CollisionModel:
         gap -= sp.radii[rows].sum(axis=1)
         names = [b.name for b in sp.bodies]
         for k, (s, t) in enumerate(rows):
-            pair = _ordered(names[sp.body[s]], names[sp.body[t]])
+            pair = ordered_pair(names[sp.body[s]], names[sp.body[t]])
             if touching_free.get(pair, -np.inf) >= self.self_margin and gap[k] < self.self_margin:
                 margins[k] = gap[k] - REFERENCE_SLACK_M
         return margins
@@ -433,11 +425,11 @@ class CollisionModel:
             )
         )
 
-    def _chain(self, joint: int) -> list[int]:
+    def chain(self, joint: int) -> list[int]:
         """Moving joints from the root to ``joint`` (both included)."""
         return [int(j) for j in self.robot.model.supports[joint]][1:]
 
-    def _travel(self, j: int) -> float:
+    def travel(self, j: int) -> float:
         """How far joint j can move its child's origin along its axis (m): prismatic range, else 0."""
         joint = self.robot.model.joints[j]
         if joint.shortname().removeprefix("JointModel").startswith("P"):
@@ -450,7 +442,7 @@ class CollisionModel:
         last joint of ``after``: Σ (|translation of the joint placement| + travel)."""
         model = self.robot.model
         return float(
-            sum(np.linalg.norm(model.jointPlacements[k].translation) + self._travel(k) for k in after)
+            sum(np.linalg.norm(model.jointPlacements[k].translation) + self.travel(k) for k in after)
         )
 
     def _motion_weights(self, n_robot: int) -> Array:
@@ -464,104 +456,13 @@ class CollisionModel:
             extent = np.linalg.norm(obj.placement.act(np.asarray(obj.geometry.aabb_center))) + float(
                 obj.geometry.aabb_radius
             )
-            chain = self._chain(int(obj.parentJoint))
+            chain = self.chain(int(obj.parentJoint))
             for i, j in enumerate(chain):
-                if self._travel(j) > 0.0:
+                if self.travel(j) > 0.0:
                     weights[g, model.joints[j].idx_v] = 1.0
                 else:
                     weights[g, model.joints[j].idx_v] = self._link_length(chain[i + 1 :]) + extent
         return weights
-
-    def _never_close(self, body_of: dict[int, Body], surfaces: list[trimesh.Trimesh]) -> tuple[tuple[str, str], ...]:
-        """Body pairs of the self pairs that can never come within ``self_margin`` (sorted names).
-
-        The relative pose of geometries a and b, one on an ancestor joint of the other's, depends only
-        on the k joints between them. For k ≤ :data:`NEVER_JOINTS`, over a whole turn of each (wider
-        than any revolute limit; the other joints at θ_ref) :meth:`_clear_everywhere` proves the exact
-        distance above the margin or finds where it may not be. A body pair is listed when all its
-        geometry pairs are proven. Prismatic joints in between leave the pair out. Each verdict
-        depends only on the two shapes (``surfaces``), the joints between and the margin, and is kept
-        in the disk cache (:mod:`optlight.cache`). Ends with the geometry placed at θ_ref."""
-        robot = self.robot
-        verdict: dict[tuple[str, str], bool] = {}
-        for pair in self.pairs:
-            key = _ordered(pair.first_body, pair.second_name)
-            if pair.kind != "self" or not verdict.get(key, True):
-                continue
-            between = self._joints_between(int(body_of[pair.first].joint), int(body_of[pair.second].joint))
-            verdict[key] = (
-                between is not None
-                and len(between) <= NEVER_JOINTS
-                and all(self._travel(j) == 0.0 for j in between)
-                and self._cached_clear(pair.first, pair.second, between, surfaces)
-            )
-        pin.updateGeometryPlacements(
-            robot.model, robot.data, self.geometry, self.geometry_data, robot.to_pin(robot.theta_ref)
-        )
-        return tuple(sorted(k for k, never in verdict.items() if never))
-
-    def _cached_clear(self, a: int, b: int, between: list[int], surfaces: list[trimesh.Trimesh]) -> bool:
-        """:meth:`_clear_everywhere` of geometries ``a`` and ``b`` over the joints ``between``,
-        through the disk cache (keyed by the shapes, the joints' placements and kinds, the margin)."""
-        model = self.robot.model
-        digest = hashlib.sha256(f"never-close {_NEVER_VERSION} {NEVER_STEP_DEG} {self.self_margin!r}".encode())
-        for g in (a, b):
-            digest.update(np.ascontiguousarray(surfaces[g].vertices, float).tobytes())
-            digest.update(np.ascontiguousarray(self.geometry.geometryObjects[g].placement.homogeneous).tobytes())
-        for j in between:
-            digest.update(model.joints[j].shortname().encode())
-            digest.update(np.ascontiguousarray(model.jointPlacements[j].homogeneous).tobytes())
-        index = [model.joints[j].idx_v for j in between]
-        found = cached_arrays(
-            "never_close",
-            digest.hexdigest(),
-            lambda: {"clear": np.array(self._clear_everywhere(a, b, index))},
-        )
-        return bool(found["clear"])
-
-    def _clear_everywhere(self, a: int, b: int, index: list[int]) -> bool:
-        """Whether geometries ``a`` and ``b`` stay beyond ``self_margin`` for every value of the
-        revolute joint angles θ[index] in [−π, π)ᵏ: branch and bound over boxes of those angles. At a
-        box's centre the exact distance is d; within its half-widths w_i a point of either geometry
-        moves at most Σ_i ρ_i w_i (:attr:`motion_weights`), so d − Σ_i ρ_i w_i > margin clears the
-        box, d ≤ margin refutes, and a box neither decides is cut in 2ᵏ, down to half-widths of
-        :data:`NEVER_STEP_DEG` / 2 (then it counts as refuted)."""
-        robot = self.robot
-        rho = self.motion_weights[[a, b]][:, index].max(axis=0)
-        smallest = np.radians(NEVER_STEP_DEG) / 2
-        half = np.pi / 4
-        starts = np.arange(-np.pi + half, np.pi, 2 * half)
-        boxes = [(np.array(c), half) for c in np.stack(np.meshgrid(*[starts] * len(index), indexing="ij"), -1).reshape(-1, len(index))]
-        corners = np.stack(np.meshgrid(*[[-0.5, 0.5]] * len(index), indexing="ij"), -1).reshape(-1, len(index))
-        while boxes:
-            center, half = boxes.pop()
-            theta = robot.theta_ref.copy()
-            theta[index] = center
-            q = robot.to_pin(theta)
-            pin.forwardKinematics(robot.model, robot.data, q)
-            for g in (a, b):
-                self.geometry_data.oMg[g] = robot.data.oMi[self.geometry.geometryObjects[g].parentJoint] * (
-                    self.geometry.geometryObjects[g].placement
-                )
-            d = self.distance(a, b)
-            if d <= self.self_margin:
-                return False
-            if d - float(rho.sum()) * half > self.self_margin:
-                continue
-            if half / 2 < smallest:
-                return False
-            boxes += [(center + half * c, half / 2) for c in corners]
-        return True
-
-    def _joints_between(self, a: int, b: int) -> list[int] | None:
-        """The joints after the ancestor of joints ``a`` and ``b`` up to the other (both on one chain),
-        which alone move one relative to the other; None when neither is the other's ancestor."""
-        chain_a, chain_b = self._chain(a), self._chain(b)
-        if a == 0 or a in chain_b:
-            return [j for j in chain_b if j not in chain_a]
-        if b == 0 or b in chain_a:
-            return [j for j in chain_a if j not in chain_b]
-        return None
 
     def _fixed_obstacle_distances(
         self, obstacle_ids: list[int], body_of: dict[int, Body]
@@ -578,7 +479,7 @@ class CollisionModel:
                 continue
             for g, body in body_of.items():
                 j = body.joint
-                if j == 0 or model.parents[j] != 0 or self._travel(j) > 0.0:
+                if j == 0 or model.parents[j] != 0 or self.travel(j) > 0.0:
                     continue
                 axis = pin.getJointJacobian(model, data, j, pin.ReferenceFrame.WORLD)[3:, model.joints[j].idx_v]
                 if abs(abs(float(axis @ obs.normal)) - 1.0) > 1e-9:
@@ -598,9 +499,9 @@ class CollisionModel:
             j = int(sp.joint[s])
             if j == 0:
                 continue
-            chain = self._chain(j)
+            chain = self.chain(j)
             origin = model.jointPlacements[chain[0]].translation[None, :]
-            reach = self._travel(chain[0]) + self._link_length(chain[1:]) + np.linalg.norm(sp.centers[s])
+            reach = self.travel(chain[0]) + self._link_length(chain[1:]) + np.linalg.norm(sp.centers[s])
             reach += sp.radii[s] + self.margin + PRUNE_SLACK_M
             body = sp.bodies[int(sp.body[s])].name
             rows += [
@@ -612,11 +513,6 @@ class CollisionModel:
             if self.view_cone is not None and self.view_cone.signed_distance(origin)[0] < reach:
                 view.append(s)
         return np.array(rows, dtype=int).reshape(-1, 2), np.array(view, dtype=int)
-
-
-def _ordered(a: str, b: str) -> tuple[str, str]:
-    """The body-name pair in sorted order (a key for either order)."""
-    return (a, b) if a <= b else (b, a)
 
 
 def _transform(m: pin.SE3) -> coal.Transform3s:
