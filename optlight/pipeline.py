@@ -89,6 +89,8 @@ from optlight.planning.trajectory import (
 )
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.relocation import base_hint
+from optlight.robot import Robot
+from optlight.robot.kinematics import PRISMATIC_JOINTS
 from optlight.setup import Setup
 from optlight.spec import LandmarksSpec, Problem, SolverSpec, TrajectorySpec
 from optlight.spec.sizing import check_trajectory_samples
@@ -170,7 +172,7 @@ def solve(
             else visiting_order(trajectory_spec, cell.limits, placement)
         )
         visited = tuple(placement.landmarks[i] for i in order)
-        landmark_thetas = placement.thetas[order]
+        landmark_thetas = unwrapped_postures(cell.robot, placement.thetas[order], cell.start)
         positions = np.array([lm.position for lm in visited])
         path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
         warm, failures = knot_ik(cell, path, landmark_thetas)
@@ -204,7 +206,8 @@ def solve(
                     f"{np.degrees(lm.azimuth):.1f}°), capture {k} of the visiting order: the trajectory NLP "
                     f"found no way {error}; of its captures this one needs the largest reconfiguration"
                 )
-                visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
+                visited = visited[:k] + visited[k + 1 :]
+                landmark_thetas = unwrapped_postures(cell.robot, np.delete(landmark_thetas, k, axis=0), cell.start)
                 positions = np.array([lm.position for lm in visited])
                 path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
                 warm, failures = knot_ik(cell, path, landmark_thetas)
@@ -380,6 +383,27 @@ class PlacementAhead:
         self._join()
 
 
+def unwrapped_postures(robot: Robot, thetas: Array, start: Array) -> Array:
+    """The capture postures ``thetas`` (M, n) (rad, in visiting order) with each angular joint of
+    range above 2π turned by the multiple of 2π, within its limits, that brings it nearest its
+    angle at the capture before (the first capture: nearest the ``start`` configuration (n,) the
+    motion comes from): the same light pose (forward kinematics is 2π-periodic in such a joint), and
+    the least reconfiguration between captures. Why: the placement solves each capture on its own,
+    and a UR5's joints can come out 2π from their neighbour's (a 5.4 rad step of the wrist between
+    two captures 20° apart), a turn the trajectory NLP then finds no way through."""
+    out = np.vstack([start, thetas])
+    angular = np.array([kind not in PRISMATIC_JOINTS for kind in robot.joint_kinds], bool)
+    wraps = angular & (robot.upper - robot.lower > 2.0 * np.pi)
+    turns = 2.0 * np.pi * np.arange(-2, 3)[:, None]  # a joint's range is at most a few turns
+    for k in range(1, len(out)):
+        candidates = out[k] + turns  # (5, n)
+        fits = ((candidates >= robot.lower) & (candidates <= robot.upper)) | (turns == 0.0)
+        distance = np.where(fits, np.abs(candidates - out[k - 1]), np.inf)
+        nearest = candidates[np.argmin(distance, axis=0), np.arange(out.shape[1])]
+        out[k, wraps] = nearest[wraps]
+    return out[1:]
+
+
 def capture_path(
     sphere: LightSphere, spec: TrajectorySpec, positions: Array, landmark_thetas: Array
 ) -> LightPath:
@@ -465,23 +489,46 @@ def optimize_window(
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path) over the knots of ``path``, warm-started
     at the per-knot IK ``warm`` (K, n) through the capture postures ``landmark_thetas`` (M, n), its
-    first knot kept at ``warm`` with ``fixed_start``; when it fails, the segments that IK could not
-    follow (:func:`unfollowed_segments`) become transfers: the light leaves the sphere between their
-    captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
-    straight line between the captures' postures), and the NLP runs again. Returns the path, its
-    warm start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such
-    segment, or again. Where there are such segments, the solve on the sphere is told the transfers
-    can follow (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry)."""
+    first knot kept at ``warm`` with ``fixed_start``; when it fails, segments become transfers (the
+    light leaves the sphere between their captures, the arm moving in joint space,
+    :attr:`LightPath.transfers`, warm-started on the straight line between the captures' postures)
+    and the NLP runs again: first those that IK could not follow (:func:`unfollowed_segments`), then,
+    if that fails too or IK followed them all, every segment of the window
+    (:func:`transfer_candidates`). Returns the path, its warm start and the NLP's result; raises
+    :class:`SolverError` when the NLP fails with every segment a transfer. Where IK left segments
+    unfollowed, the solve on the sphere is told the transfers can follow
+    (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry).
+
+    Why every segment: a window whose captures the placement found clear and whose arcs IK followed
+    can still have no way on the sphere at the NLP's step bound and sphere rows (a random UR5 cell
+    with a table and a wall: the RTI set's 16 captures all clear, the window between two of them
+    infeasible on the sphere); off it, the arm goes from one clear posture to the next, and the
+    capture that would otherwise be dropped (``[landmarks] allow_partial``) is kept."""
     unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
     nlp = partial(optimize_knots, cell, spec, solver)
     try:
         return path, warm, nlp(path, warm, fixed_start, fallback=bool(unfollowed.any()))
-    except SolverError:
-        if not unfollowed.any():
-            raise
-    path = path.with_transfers(unfollowed)
-    warm, _ = knot_ik(cell, path, landmark_thetas)
-    return path, warm, nlp(path, warm, fixed_start)
+    except SolverError as e:
+        error = e
+    for transfers in transfer_candidates(path, unfollowed):
+        moved = path.with_transfers(transfers)
+        moved_warm, _ = knot_ik(cell, moved, landmark_thetas)
+        try:
+            return moved, moved_warm, nlp(moved, moved_warm, fixed_start)
+        except SolverError as e:
+            error = e
+    raise error
+
+
+def transfer_candidates(path: LightPath, unfollowed: NDArray[np.bool_]) -> list[NDArray[np.bool_]]:
+    """The transfers (M − 1,) :func:`optimize_window` tries, in order, when the NLP on ``path``'s
+    sphere fails: its transfers and the ``unfollowed`` segments (if there are such), then every
+    segment; each only once, and none that is the path's own."""
+    candidates: list[NDArray[np.bool_]] = []
+    for transfers in (path.transfers | unfollowed, np.ones_like(path.transfers)):
+        if not np.array_equal(transfers, path.transfers) and not any(np.array_equal(transfers, c) for c in candidates):
+            candidates.append(transfers)
+    return candidates
 
 
 def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
