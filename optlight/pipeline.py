@@ -453,7 +453,8 @@ def optimize_path(
     results: list[TrajectoryNLPResult] = []
     for done, (first, last) in enumerate(windows):
         attempts = [(first, False)] if done == 0 else [(first, True), (windows[done - 1][0], done > 1)]
-        for start, fixed in attempts:
+        attempts.append((first, done > 0))  # last: every segment of the window a transfer
+        for attempt, (start, fixed) in enumerate(attempts):
             knots, window = path.knots_between(start, last), path.window(start, last)
             postures, initial, missed = landmark_thetas[start : last + 1].copy(), warm[knots], failures[start:last]
             if fixed:  # from the posture the window before ended at
@@ -461,7 +462,7 @@ def optimize_path(
                 initial, missed = knot_ik(cell, window, postures)
             try:
                 window, warm_window, result = optimize_window(
-                    cell, spec, solver, window, initial, missed, postures, fixed
+                    cell, spec, solver, window, initial, missed, postures, fixed, attempt == len(attempts) - 1
                 )
                 break
             except SolverError as e:
@@ -486,49 +487,37 @@ def optimize_window(
     failures: NDArray[np.int64],
     landmark_thetas: Array,
     fixed_start: bool = False,
+    transfer_all: bool = False,
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path) over the knots of ``path``, warm-started
     at the per-knot IK ``warm`` (K, n) through the capture postures ``landmark_thetas`` (M, n), its
-    first knot kept at ``warm`` with ``fixed_start``; when it fails, segments become transfers (the
-    light leaves the sphere between their captures, the arm moving in joint space,
-    :attr:`LightPath.transfers`, warm-started on the straight line between the captures' postures)
-    and the NLP runs again: first those that IK could not follow (:func:`unfollowed_segments`), then,
-    if that fails too or IK followed them all, every segment of the window
-    (:func:`transfer_candidates`). Returns the path, its warm start and the NLP's result; raises
-    :class:`SolverError` when the NLP fails with every segment a transfer. Where IK left segments
-    unfollowed, the solve on the sphere is told the transfers can follow
+    first knot kept at ``warm`` with ``fixed_start``; when it fails, the segments that IK could not
+    follow (:func:`unfollowed_segments`) become transfers: the light leaves the sphere between their
+    captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
+    straight line between the captures' postures), and the NLP runs again. With ``transfer_all``,
+    every segment is a transfer, without a try on the sphere. Returns the path, its warm start and
+    the NLP's result; raises :class:`SolverError` when the NLP fails with no such segment, or again.
+    Where there are such segments, the solve on the sphere is told the transfers can follow
     (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry).
 
-    Why every segment: a window whose captures the placement found clear and whose arcs IK followed
-    can still have no way on the sphere at the NLP's step bound and sphere rows (a random UR5 cell
-    with a table and a wall: the RTI set's 16 captures all clear, the window between two of them
-    infeasible on the sphere); off it, the arm goes from one clear posture to the next, and the
-    capture that would otherwise be dropped (``[landmarks] allow_partial``) is kept."""
-    unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
+    Why ``transfer_all``: a window whose captures the placement found clear and whose arcs IK
+    followed can still have no way on the sphere at the NLP's step bound and sphere rows; off it,
+    the arm goes from one clear posture to the next, and the capture that would otherwise be
+    dropped is kept."""
     nlp = partial(optimize_knots, cell, spec, solver)
+    if transfer_all:
+        path = path.with_transfers(np.ones_like(path.transfers))
+        warm, _ = knot_ik(cell, path, landmark_thetas)
+        return path, warm, nlp(path, warm, fixed_start)
+    unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
     try:
         return path, warm, nlp(path, warm, fixed_start, fallback=bool(unfollowed.any()))
-    except SolverError as e:
-        error = e
-    for transfers in transfer_candidates(path, unfollowed):
-        moved = path.with_transfers(transfers)
-        moved_warm, _ = knot_ik(cell, moved, landmark_thetas)
-        try:
-            return moved, moved_warm, nlp(moved, moved_warm, fixed_start)
-        except SolverError as e:
-            error = e
-    raise error
-
-
-def transfer_candidates(path: LightPath, unfollowed: NDArray[np.bool_]) -> list[NDArray[np.bool_]]:
-    """The transfers (M − 1,) :func:`optimize_window` tries, in order, when the NLP on ``path``'s
-    sphere fails: its transfers and the ``unfollowed`` segments (if there are such), then every
-    segment; each only once, and none that is the path's own."""
-    candidates: list[NDArray[np.bool_]] = []
-    for transfers in (path.transfers | unfollowed, np.ones_like(path.transfers)):
-        if not np.array_equal(transfers, path.transfers) and not any(np.array_equal(transfers, c) for c in candidates):
-            candidates.append(transfers)
-    return candidates
+    except SolverError:
+        if not unfollowed.any():
+            raise
+    path = path.with_transfers(unfollowed)
+    warm, _ = knot_ik(cell, path, landmark_thetas)
+    return path, warm, nlp(path, warm, fixed_start)
 
 
 def hardest_capture(landmark_thetas: Array, first: int, last: int) -> int:
