@@ -385,23 +385,33 @@ class PlacementAhead:
 
 def unwrapped_postures(robot: Robot, thetas: Array, start: Array) -> Array:
     """The capture postures ``thetas`` (M, n) (rad, in visiting order) with each angular joint of
-    range above 2π turned by the multiple of 2π, within its limits, that brings it nearest its
-    angle at the capture before (the first capture: nearest the ``start`` configuration (n,) the
-    motion comes from): the same light pose (forward kinematics is 2π-periodic in such a joint), and
-    the least reconfiguration between captures. Why: the placement solves each capture on its own,
-    and a UR5's joints can come out 2π from their neighbour's (a 5.4 rad step of the wrist between
-    two captures 20° apart), a turn the trajectory NLP then finds no way through."""
-    out = np.vstack([start, thetas])
+    range above 2π turned by multiples of 2π, within its limits, that make its travel from the
+    ``start`` configuration (n,) through the captures, Σ_k |θ_k − θ_{k−1}|, least (each joint on its
+    own, by dynamic programming over its ≤ 5 turns at each capture): the same light poses (forward
+    kinematics is 2π-periodic in such a joint), and the least reconfiguration between captures.
+    Why: the placement solves each capture on its own, and a UR5's joints can come out 2π from their
+    neighbour's (a 5.4 rad step of the wrist between two captures 20° apart), a turn the trajectory
+    NLP then finds no way through."""
+    thetas = np.asarray(thetas, float)
+    if len(thetas) == 0:
+        return thetas.copy()
     angular = np.array([kind not in PRISMATIC_JOINTS for kind in robot.joint_kinds], bool)
     wraps = angular & (robot.upper - robot.lower > 2.0 * np.pi)
     turns = 2.0 * np.pi * np.arange(-2, 3)[:, None]  # a joint's range is at most a few turns
-    for k in range(1, len(out)):
-        candidates = out[k] + turns  # (5, n)
-        fits = ((candidates >= robot.lower) & (candidates <= robot.upper)) | (turns == 0.0)
-        distance = np.where(fits, np.abs(candidates - out[k - 1]), np.inf)
-        nearest = candidates[np.argmin(distance, axis=0), np.arange(out.shape[1])]
-        out[k, wraps] = nearest[wraps]
-    return out[1:]
+    candidates = thetas[:, None, :] + turns  # (M, 5, n)
+    fits = ((candidates >= robot.lower) & (candidates <= robot.upper)) | (turns == 0.0)
+    cost = np.where(fits[0], np.abs(candidates[0] - start), np.inf)  # (5, n): least travel to each turn
+    back = []
+    for k in range(1, len(thetas)):
+        step = cost[:, None, :] + np.abs(candidates[k][None, :, :] - candidates[k - 1][:, None, :])  # (5, 5, n)
+        back.append(np.argmin(step, axis=0))
+        cost = np.where(fits[k], np.min(step, axis=0), np.inf)
+    choice = np.empty((len(thetas), thetas.shape[1]), int)
+    choice[-1] = np.argmin(cost, axis=0)
+    for k in range(len(thetas) - 1, 0, -1):  # back along the least travel
+        choice[k - 1] = back[k - 1][choice[k], np.arange(thetas.shape[1])]
+    chosen = np.take_along_axis(candidates, choice[:, None, :], axis=1)[:, 0, :]
+    return np.where(wraps, chosen, thetas)
 
 
 def capture_path(

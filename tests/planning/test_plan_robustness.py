@@ -302,8 +302,9 @@ def _turned(robot: object, thetas: np.ndarray, every: int = 2) -> np.ndarray:
 @pytest.mark.parametrize("name", ["face_ur5", "default"])
 def test_unwrapped_postures_keep_the_light_pose_and_turn_least(name: str) -> None:
     """Turned by whole turns, capture postures give the same light pose (pinocchio's kinematics);
-    unwrapped along the visiting order they are back within π of the posture before in every joint
-    of range above 2π (the UR5's six; none of the Panda's, which are left as they are)."""
+    unwrapped along the visiting order they are back at the postures of least travel (here the
+    untouched ones, each step under 1 rad) in every joint of range above 2π (the UR5's five; none
+    of the Panda's, which are left as they are)."""
     from optlight.pipeline import unwrapped_postures
 
     robot = Setup.from_problem(optlight.load_problem(name)).workcell.robot
@@ -322,6 +323,30 @@ def test_unwrapped_postures_keep_the_light_pose_and_turn_least(name: str) -> Non
         np.testing.assert_allclose(unwrapped[:, wraps], thetas[:, wraps], atol=1e-12)
     else:
         np.testing.assert_array_equal(unwrapped, turned)
+
+
+def test_unwrapped_postures_travel_least_of_every_choice_of_turns() -> None:
+    """Against every choice of whole turns within the limits (enumerated, joint by joint): the
+    unwrapped postures' travel Σ_k |θ_k − θ_{k−1}| from the start is the least, on a UR5 whose
+    postures are drawn anywhere in its limits."""
+    import itertools
+
+    from optlight.pipeline import unwrapped_postures
+
+    robot = Setup.from_problem(optlight.load_problem("face_ur5")).workcell.robot
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        start = rng.uniform(robot.lower, robot.upper)
+        thetas = rng.uniform(robot.lower, robot.upper, size=(4, robot.n))
+        unwrapped = unwrapped_postures(robot, thetas, start)
+        for j in range(robot.n):
+            options = [
+                [t + 2 * np.pi * m for m in range(-2, 3) if robot.lower[j] <= t + 2 * np.pi * m <= robot.upper[j]]
+                for t in thetas[:, j]
+            ]
+            least = min(np.abs(np.diff([start[j], *path])).sum() for path in itertools.product(*options))
+            travel = np.abs(np.diff([start[j], *unwrapped[:, j]])).sum()
+            assert travel == pytest.approx(least, abs=1e-12)
 
 
 @pytest.mark.slow
