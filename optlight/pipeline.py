@@ -37,7 +37,6 @@ the solve draws nothing and writes nothing):
 
 from __future__ import annotations
 
-import dataclasses
 import queue
 import threading
 import time
@@ -87,8 +86,8 @@ from optlight.planning.trajectory import (
     knots_on_arcs,
     optimize_knots,
     plan_transfer,
-    whole_turns,
 )
+from optlight.planning.turns import unwrapped_postures
 from optlight.planning.waypoints import Waypoints, controller_waypoints
 from optlight.relocation import base_hint
 from optlight.setup import Setup
@@ -172,7 +171,7 @@ def solve(
             else visiting_order(trajectory_spec, cell.limits, placement)
         )
         visited = tuple(placement.landmarks[i] for i in order)
-        landmark_thetas = placement.thetas[order]
+        landmark_thetas = unwrapped_postures(cell.robot, placement.thetas[order], cell.start)
         positions = np.array([lm.position for lm in visited])
         path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
         warm, failures = knot_ik(cell, path, landmark_thetas)
@@ -206,16 +205,11 @@ def solve(
                     f"{np.degrees(lm.azimuth):.1f}°), capture {k} of the visiting order: the trajectory NLP "
                     f"found no way {error}; of its captures this one needs the largest reconfiguration"
                 )
-                visited, landmark_thetas = visited[:k] + visited[k + 1 :], np.delete(landmark_thetas, k, axis=0)
+                visited = visited[:k] + visited[k + 1 :]
+                landmark_thetas = unwrapped_postures(cell.robot, np.delete(landmark_thetas, k, axis=0), cell.start)
                 positions = np.array([lm.position for lm in visited])
                 path = capture_path(cell.sphere, trajectory_spec, positions, landmark_thetas)
                 warm, failures = knot_ik(cell, path, landmark_thetas)
-        # the same postures, each revolute joint at the turn nearest the start: shortest transfers
-        turns = whole_turns(cell, cell.start, clear.timed_knots, trajectory_spec.return_home)
-        if turns.any():
-            landmark_thetas, warm = landmark_thetas + turns, warm + turns
-            nlp = dataclasses.replace(nlp, theta=nlp.theta + turns)
-            clear = dataclasses.replace(clear, warm=warm, nlp=nlp, timed_knots=clear.timed_knots + turns)
     heard("nlp", OptimizedPath(visited, landmark_thetas, path, warm, nlp))
     lightset = (
         set_summary(cell.sphere, design, visited, landmark_thetas, np.arange(len(visited))) if design else None
@@ -437,7 +431,8 @@ def optimize_path(
     results: list[TrajectoryNLPResult] = []
     for done, (first, last) in enumerate(windows):
         attempts = [(first, False)] if done == 0 else [(first, True), (windows[done - 1][0], done > 1)]
-        for start, fixed in attempts:
+        attempts.append((first, done > 0))  # last: every segment of the window a transfer
+        for attempt, (start, fixed) in enumerate(attempts):
             knots, window = path.knots_between(start, last), path.window(start, last)
             postures, initial, missed = landmark_thetas[start : last + 1].copy(), warm[knots], failures[start:last]
             if fixed:  # from the posture the window before ended at
@@ -445,7 +440,7 @@ def optimize_path(
                 initial, missed = knot_ik(cell, window, postures)
             try:
                 window, warm_window, result = optimize_window(
-                    cell, spec, solver, window, initial, missed, postures, fixed
+                    cell, spec, solver, window, initial, missed, postures, fixed, attempt == len(attempts) - 1
                 )
                 break
             except SolverError as e:
@@ -470,18 +465,29 @@ def optimize_window(
     failures: NDArray[np.int64],
     landmark_thetas: Array,
     fixed_start: bool = False,
+    transfer_all: bool = False,
 ) -> tuple[LightPath, Array, TrajectoryNLPResult]:
     """The trajectory NLP on the sphere (the paper's path) over the knots of ``path``, warm-started
     at the per-knot IK ``warm`` (K, n) through the capture postures ``landmark_thetas`` (M, n), its
     first knot kept at ``warm`` with ``fixed_start``; when it fails, the segments that IK could not
     follow (:func:`unfollowed_segments`) become transfers: the light leaves the sphere between their
     captures, the arm moving in joint space (:attr:`LightPath.transfers`, warm-started on the
-    straight line between the captures' postures), and the NLP runs again. Returns the path, its
-    warm start and the NLP's result; raises :class:`SolverError` when the NLP fails with no such
-    segment, or again. Where there are such segments, the solve on the sphere is told the transfers
-    can follow (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry)."""
-    unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
+    straight line between the captures' postures), and the NLP runs again. With ``transfer_all``,
+    every segment is a transfer, without a try on the sphere. Returns the path, its warm start and
+    the NLP's result; raises :class:`SolverError` when the NLP fails with no such segment, or again.
+    Where there are such segments, the solve on the sphere is told the transfers can follow
+    (``optimize_knots(fallback=True)``: a short first try, no small-barrier retry).
+
+    Why ``transfer_all``: a window whose captures the placement found clear and whose arcs IK
+    followed can still have no way on the sphere at the NLP's step bound and sphere rows; off it,
+    the arm goes from one clear posture to the next, and the capture that would otherwise be
+    dropped is kept."""
     nlp = partial(optimize_knots, cell, spec, solver)
+    if transfer_all:
+        path = path.with_transfers(np.ones_like(path.transfers))
+        warm, _ = knot_ik(cell, path, landmark_thetas)
+        return path, warm, nlp(path, warm, fixed_start)
+    unfollowed = unfollowed_segments(cell, spec, path, warm, failures)
     try:
         return path, warm, nlp(path, warm, fixed_start, fallback=bool(unfollowed.any()))
     except SolverError:

@@ -5,6 +5,9 @@ found clear, or says how many fit."""
 
 from __future__ import annotations
 
+import warnings
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from conftest import reacher_of, reduced_problem
@@ -280,3 +283,108 @@ def test_the_planners_path_allowance_is_within_the_verifications_tolerance() -> 
     np.testing.assert_allclose(
         following._polyline_distance(points, polyline), distance_to_polyline(points, polyline), atol=1e-12
     )
+
+
+def _turned(robot: object, thetas: np.ndarray, every: int = 2) -> np.ndarray:
+    """``thetas`` (M, n) with each joint of range above 2π turned by a whole turn (+2π where its
+    limits allow, else −2π) at every ``every``-th capture from the second: the same light poses."""
+    from optlight.robot.kinematics import PRISMATIC_JOINTS
+
+    lower, upper = robot.lower, robot.upper  # type: ignore[attr-defined]
+    wraps = np.array([k not in PRISMATIC_JOINTS for k in robot.joint_kinds]) & (upper - lower > 2 * np.pi)  # type: ignore[attr-defined]
+    out = np.array(thetas, float, copy=True)
+    for k in range(1, len(out), every):
+        up = out[k] + 2 * np.pi
+        out[k, wraps] = np.where(up <= upper, up, out[k] - 2 * np.pi)[wraps]
+    return out
+
+
+@pytest.mark.parametrize("name", ["face_ur5", "default"])
+def test_unwrapped_postures_keep_the_light_pose_and_turn_least(name: str) -> None:
+    """Turned by whole turns, capture postures give the same light pose (pinocchio's kinematics);
+    unwrapped along the visiting order they are back at the postures of least travel (here the
+    untouched ones, each step under 1 rad) in every joint of range above 2π (the UR5's five; none
+    of the Panda's, which are left as they are)."""
+    from optlight.planning.turns import unwrapped_postures
+
+    robot = Setup.from_problem(optlight.load_problem(name)).workcell.robot
+    rng = np.random.default_rng(3)
+    steps = rng.uniform(-1.0, 1.0, size=(6, robot.n))  # neighbours within 1 rad: nothing to unwrap
+    thetas = np.clip(np.cumsum(steps, axis=0), np.maximum(robot.lower, -2.5), np.minimum(robot.upper, 2.5))
+    turned = _turned(robot, thetas)
+    unwrapped = unwrapped_postures(robot, turned, thetas[0])
+    for a, b in zip(turned, unwrapped, strict=True):
+        (pa, ra), (pb, rb) = robot.light_pose(a), robot.light_pose(b)
+        assert np.allclose(pa, pb, atol=1e-12) and np.allclose(ra, rb, atol=1e-12)
+    assert np.all((unwrapped >= robot.lower) & (unwrapped <= robot.upper))
+    wraps = robot.upper - robot.lower > 2 * np.pi
+    if wraps.any():
+        assert not np.allclose(turned, thetas)  # the test turns something
+        np.testing.assert_allclose(unwrapped[:, wraps], thetas[:, wraps], atol=1e-12)
+    else:
+        np.testing.assert_array_equal(unwrapped, turned)
+
+
+def test_unwrapped_postures_travel_least_of_every_choice_of_turns() -> None:
+    """Against every choice of whole turns within the limits (enumerated, joint by joint): the
+    unwrapped postures' travel Σ_k |θ_k − θ_{k−1}| from the start is the least, on a UR5 whose
+    postures are drawn anywhere in its limits."""
+    import itertools
+
+    from optlight.planning.turns import unwrapped_postures
+
+    robot = Setup.from_problem(optlight.load_problem("face_ur5")).workcell.robot
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        start = rng.uniform(robot.lower, robot.upper)
+        thetas = rng.uniform(robot.lower, robot.upper, size=(4, robot.n))
+        unwrapped = unwrapped_postures(robot, thetas, start)
+        for j in range(robot.n):
+            options = [
+                [t + 2 * np.pi * m for m in range(-2, 3) if robot.lower[j] <= t + 2 * np.pi * m <= robot.upper[j]]
+                for t in thetas[:, j]
+            ]
+            least = min(np.abs(np.diff([start[j], *path])).sum() for path in itertools.product(*options))
+            travel = np.abs(np.diff([start[j], *unwrapped[:, j]])).sum()
+            assert travel == pytest.approx(least, abs=1e-12)
+
+
+@pytest.mark.slow
+def test_captures_placed_a_turn_apart_are_all_delivered(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A UR5 on a table whose placement gives every other capture a whole turn of each joint (the
+    same light pose, as a placement that solves each capture on its own can): the plan unwraps them
+    and captures every placed landmark, verified, none dropped by the trajectory NLP; the dense
+    trajectory is clear by coal's exact distances. (Turning the shoulder by 2π sweeps the arm through
+    the table: there is no way through those postures as placed, and allow_partial dropped captures.)"""
+    import optlight.pipeline as pipeline
+    from optlight.environment.check import check_configurations
+
+    real = pipeline.PlacementAhead.placement
+    placed: list[int] = []
+
+    def turned(self, captures):  # type: ignore[no-untyped-def]
+        placement = real(self, captures)
+        placed.append(len(placement.landmarks))
+        return replace(placement, thetas=_turned(self.reacher.cell.robot, placement.thetas))
+
+    monkeypatch.setattr(pipeline.PlacementAhead, "placement", turned)
+    problem = reduced_problem(
+        "face_ur5",
+        camera_px=64,
+        landmarks={"count": 6, "allow_partial": True},
+        environment={"enabled": True, "table_height_m": -0.02},
+        view={"mode": "off"},  # more of the ring clear: more captures to turn
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        plan = optlight.solve(problem)
+    assert not [w for w in caught if "the trajectory NLP found no way" in str(w.message)]
+    assert placed[-1] >= 2 and len(plan.visited) == placed[-1]
+    assert plan.verification.passed
+    cell, trajectory = plan.setup.workcell, plan.trajectory
+    times = np.union1d(trajectory.sample_times(500.0), trajectory.capture_times)
+    q, _, _ = trajectory.sample(times)
+    model = cell.environment.collision_model(cell.robot)
+    report = check_configurations(model, q, times, view="off")
+    assert report.passed, report.summary()
+    assert report.min_clearance_m > 0.0

@@ -1,6 +1,6 @@
 """The transfers from the start to the captures and back (docs/design.md §6): each revolute joint of
-the plan at the whole turn nearest the start, so that a transfer does not sweep the arm through the
-table to reach a posture it has, the same, a turn away."""
+the captures at the whole turn of least travel from the start (planning/turns.py), so that a
+transfer does not sweep the arm through the table to reach a posture it has, the same, a turn away."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ import optlight
 from optlight.errors import SolverError
 from optlight.pipeline import time_knots
 from optlight.planning.path import LightPath
-from optlight.planning.trajectory import plan_transfer, whole_turns
+from optlight.planning.trajectory import plan_transfer
+from optlight.planning.turns import unwrapped_postures
 from optlight.setup import Setup
 from optlight.spec import Problem, problem_from_dict
 
@@ -66,9 +67,8 @@ def test_a_posture_a_turn_away_is_reached_over_the_top_and_the_timed_motion_clea
     with pytest.raises(SolverError):  # no way through 90°: the upper arm would go into the table
         plan_transfer(cell, setup.solver, start, CAPTURE)
 
-    turns = whole_turns(cell, start, CAPTURE[None], back=True)
-    np.testing.assert_allclose(turns, [0.0, -2 * np.pi, 0.0, 0.0, 0.0, 0.0])
-    goal = CAPTURE + turns
+    goal = unwrapped_postures(cell.robot, CAPTURE[None], start)[0]
+    np.testing.assert_allclose(goal - CAPTURE, [0.0, -2 * np.pi, 0.0, 0.0, 0.0, 0.0])
     for a, b in zip(setup.robot.light_pose(goal), setup.robot.light_pose(CAPTURE), strict=True):
         np.testing.assert_allclose(a, b, atol=1e-12)  # the same posture
 
@@ -80,14 +80,17 @@ def test_a_posture_a_turn_away_is_reached_over_the_top_and_the_timed_motion_clea
     np.testing.assert_allclose(q[[0, -1]], [start, start], atol=1e-9)
 
 
-def test_whole_turns_keep_every_knot_within_the_joint_limits(ur3_on_table: Problem) -> None:
+def test_whole_turns_keep_every_capture_within_the_joint_limits(ur3_on_table: Problem) -> None:
     cell = Setup.from_problem(ur3_on_table).workcell
-    # the last wrist from −0.5 to 6 rad: a turn either way leaves its ±2π limits, however near the start
+    # the last wrist at 6 rad, near its +2π limit: a start at −6 rad cannot pull it a turn up, only down
     knots = np.array([CAPTURE + [0, 0, 0, 0, 0, -0.5], CAPTURE + [0, 0, 0, 0, 0, 6.0]])
     start = cell.start + [0, 0, 0, 0, 0, -6.0]
-    turns = whole_turns(cell, start, knots, back=True)
-    np.testing.assert_allclose(turns, [0.0, -2 * np.pi, 0.0, 0.0, 0.0, 0.0])
-    assert np.all(knots + turns >= cell.limits.lower) and np.all(knots + turns <= cell.limits.upper)
+    turned = unwrapped_postures(cell.robot, knots, start)
+    np.testing.assert_allclose(turned[:, 1] - knots[:, 1], -2 * np.pi)  # shoulder_lift over the top
+    assert np.all(turned >= cell.limits.lower) and np.all(turned <= cell.limits.upper)
+    for a, b in zip(turned, knots, strict=True):  # the same postures
+        for x, y in zip(cell.robot.light_pose(a), cell.robot.light_pose(b), strict=True):
+            np.testing.assert_allclose(x, y, atol=1e-12)
 
 
 @pytest.mark.slow

@@ -72,7 +72,6 @@ from optlight.planning.trajectory.transfer import (
     TRANSFER_PADDING,
     TRANSFER_STEP,
     plan_transfer,
-    whole_turns,
 )
 
 __all__ = [
@@ -103,7 +102,6 @@ __all__ = [
     "near_rows",
     "optimize_knots",
     "plan_transfer",
-    "whole_turns",
     "rows_of",
     "solve_active_rows",
 ]

@@ -19,7 +19,6 @@ from optlight.planning.nlp import (
 from optlight.planning.trajectory.active_rows import rows_of, solve_active_rows
 from optlight.planning.trajectory.between import too_close_between
 from optlight.planning.trajectory.optimizer import Array
-from optlight.robot.kinematics import PRISMATIC_JOINTS
 from optlight.spec import SolverSpec
 from optlight.workcell import Workcell
 
@@ -176,35 +175,3 @@ def _thinned(knots: Array, step: float) -> Array:
     if kept[-1] != len(knots) - 1:
         kept.append(len(knots) - 1)
     return knots[kept]
-
-
-#: Largest distance (m) the timed path's light may stray from the planned path (the polyline of the
-#: knots' lights) between two knots of a segment on the sphere before a knot is added there: half the
-#: verification's tolerance (:attr:`optlight.verify.Tolerances.path_m`, 5 mm; the planner does not
-
-
-def whole_turns(cell: Workcell, start: Array, knots: Array, back: bool) -> Array:
-    """(n,) the multiples of 2π (rad) to add to each revolute joint of ``cell``'s robot at every one
-    of the plan's ``knots`` (K, n) so that its transfers from ``start`` (rad) to the first knot and,
-    with ``back``, from the last knot are shortest, every knot staying within the joint limits: per
-    joint, the whole k minimising |θ_0 + 2πk − s| (+ |θ_{K−1} + 2πk − s|), k = 0 on a tie.
-
-    A revolute joint at θ and at θ + 2π is one posture: the light, the clearances and the view of
-    every knot are unchanged, only the way the transfers turn. The trajectory NLP and the IK place
-    a capture at any turn within the limits (a UR3's shoulder_lift at 3.08 rad is 4.65 rad from the
-    start's −1.57 through the table below the shoulder, and 1.63 rad from it at −3.20 rad, over the
-    top)."""
-    lower, upper = cell.limits.lower, cell.limits.upper
-    revolute = np.array([kind not in PRISMATIC_JOINTS for kind in cell.robot.joint_kinds])
-    ends = knots[[0, -1]] if back else knots[:1]
-    turns = np.zeros(cell.robot.n)
-    for j in np.flatnonzero(revolute):
-        low = int(np.ceil((lower[j] - knots[:, j].min()) / (2 * np.pi) - 1e-12))
-        high = int(np.floor((upper[j] - knots[:, j].max()) / (2 * np.pi) + 1e-12))
-        options = list(range(low, high + 1))
-        if 0 not in options:  # a knot beyond the limits: the verification reports it
-            continue
-        cost = [float(np.abs(ends[:, j] + 2 * np.pi * k - start[j]).sum()) for k in options]
-        if cost[options.index(0)] > min(cost) + 1e-9:
-            turns[j] = 2 * np.pi * options[int(np.argmin(cost))]
-    return turns
