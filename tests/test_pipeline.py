@@ -81,10 +81,10 @@ def test_plan_meets_the_light_constraints_and_limits(plan: optlight.Plan) -> Non
 
 
 def test_the_nlp_in_windows_plans_what_one_nlp_plans(plan: optlight.Plan, monkeypatch) -> None:
-    import optlight.pipeline as pipeline
+    import optlight.planning.trajectory.windows as windows
 
     size = plan.path.n_knots // 3
-    monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", size)
+    monkeypatch.setattr(windows, "NLP_WINDOW_KNOTS", size)
     assert len(plan.path.windows(size)) >= 2
     events: list[tuple[str, int, int]] = []
     windowed = optlight.solve(small_problem(), progress=lambda *e: events.append(e))

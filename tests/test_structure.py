@@ -167,6 +167,19 @@ def test_planning_modules_take_what_they_use() -> None:
     assert not naming, naming
 
 
+#: Longest module in optlight/ (lines): one idea per module.
+MAX_MODULE_LINES = 600
+
+
+def test_every_module_holds_one_idea() -> None:
+    long = {
+        str(path.relative_to(ROOT)): n
+        for path in PACKAGE.rglob("*.py")
+        if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
 def test_no_module_imports_another_modules_private_names() -> None:
     private = [
         f"{_module_name(path)}: from {node.module} import {alias.name}"

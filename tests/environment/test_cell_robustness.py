@@ -269,8 +269,8 @@ def test_a_window_with_one_capture_has_no_unfollowed_segment() -> None:
     (it raised TypeError, a traceback, in a random cell)."""
     from conftest import reduced_problem
 
-    from optlight.pipeline import unfollowed_segments
     from optlight.planning.path import build_path
+    from optlight.planning.trajectory.windows import unfollowed_segments
 
     setup = Setup.from_problem(reduced_problem("collision", camera_px=32))
     assert setup.environment is not None and setup.environment.collisions

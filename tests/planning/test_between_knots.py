@@ -11,12 +11,13 @@ import pytest
 
 import optlight
 from optlight.errors import CaptureSolverError
-from optlight.pipeline import capture_path, knots_on_path, optimize_path, time_knots, verify_knots
+from optlight.pipeline import capture_path, knots_on_path, time_knots, verify_knots
 from optlight.planning.jerk import jerk_limited_timing
 from optlight.planning.path import LightPath
 from optlight.planning.policy import knot_ik
 from optlight.planning.trajectory import TrajectoryNLPResult, clear_between_knots
 from optlight.planning.trajectory.between import timed_between
+from optlight.planning.trajectory.windows import optimize_path
 from optlight.setup import Setup
 from optlight.spec import Problem, SolverSpec, TrajectorySpec, problem_from_dict
 from optlight.workcell import Workcell

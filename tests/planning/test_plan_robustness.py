@@ -192,7 +192,7 @@ def test_the_timed_path_keeps_to_the_planned_path_between_far_apart_postures(sma
 
 
 def test_hardest_capture_is_the_one_farthest_from_its_neighbours() -> None:
-    from optlight.pipeline import hardest_capture
+    from optlight.planning.trajectory.windows import hardest_capture
 
     thetas = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 1.5], [0.2, 0.1], [0.3, 0.1]])
     assert hardest_capture(thetas, 0, 4) == 2  # 1.5 rad before it, 1.4 after: a posture off its way
@@ -208,9 +208,10 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
     the plan says between which captures and why; with [landmarks] allow_partial it drops the
     capture that needs the largest reconfiguration and plans the rest."""
     import optlight.pipeline as pipeline
+    import optlight.planning.trajectory.windows as windows
     from optlight.errors import CaptureSolverError, SolverError
 
-    real_path, real_knots = pipeline.capture_path, pipeline.optimize_knots
+    real_path, real_knots = pipeline.capture_path, windows.optimize_knots
     paths: list[int] = []  # captures of each path the pipeline plans
 
     def counted_path(sphere, spec, positions, thetas):  # type: ignore[no-untyped-def]
@@ -223,7 +224,7 @@ def test_a_capture_the_trajectory_nlp_finds_no_way_through_is_named_and_dropped_
         return real_knots(cell, spec, solver, path, warm, fixed_start, **kwargs)
 
     monkeypatch.setattr(pipeline, "capture_path", counted_path)
-    monkeypatch.setattr(pipeline, "optimize_knots", fails_with_every_capture)
+    monkeypatch.setattr(windows, "optimize_knots", fails_with_every_capture)
     with pytest.raises(CaptureSolverError, match=r"between captures 0 and \d+ \(visiting order\).*Infeasible"):
         optlight.solve(small_default)
     paths.clear()

@@ -145,7 +145,7 @@ def test_verification_skips_the_path_on_transfers_and_checks_the_light_stays_out
 def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     small_setup: Setup, setup, monkeypatch
 ) -> None:
-    import optlight.pipeline as pipeline
+    import optlight.planning.trajectory.windows as windows
 
     _, _, path, warm = setup
     thetas = warm[path.landmark_knots]
@@ -158,10 +158,10 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
         return TrajectoryNLPResult(warm_, True, "solved", 0.0, 0.0, 1, 0.0)
 
-    monkeypatch.setattr(pipeline, "optimize_knots", on_the_sphere_fails)
-    monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", path.n_knots)  # one window: the whole path
+    monkeypatch.setattr(windows, "optimize_knots", on_the_sphere_fails)
+    monkeypatch.setattr(windows, "NLP_WINDOW_KNOTS", path.n_knots)  # one window: the whole path
     # no knot the per-knot IK missed: the window's last try leaves the sphere on every segment
-    left, _, result = pipeline.optimize_path(
+    left, _, result = windows.optimize_path(
         small_setup.workcell,
         small_setup.trajectory_spec,
         small_setup.solver,
@@ -174,7 +174,7 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     assert [t.tolist() for t in seen] == [[False] * 4, [True] * 4] and fallbacks == [False, False]
     seen.clear()
     fallbacks.clear()
-    left, left_warm, result = pipeline.optimize_path(
+    left, left_warm, result = windows.optimize_path(
         small_setup.workcell,
         small_setup.trajectory_spec,
         small_setup.solver,
@@ -193,7 +193,7 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
     # no knot missed, but a jump to another IK branch inside segment 0: that segment leaves the sphere
     jumped = warm.copy()
     jumped[path.segments()[0].start + 2] += 1.0
-    left, _, _ = pipeline.optimize_path(
+    left, _, _ = windows.optimize_path(
         small_setup.workcell,
         small_setup.trajectory_spec,
         small_setup.solver,
@@ -213,7 +213,7 @@ def test_the_pipeline_leaves_the_sphere_only_where_the_nlp_finds_no_way_on_it(
             return np.array([-0.01 if np.array_equal(q, colliding_knot) else 0.1]), np.zeros(0)
 
     among_obstacles = replace(small_setup, environment=Colliding())
-    left, _, _ = pipeline.optimize_path(
+    left, _, _ = windows.optimize_path(
         among_obstacles.workcell,
         among_obstacles.trajectory_spec,
         among_obstacles.solver,
@@ -271,7 +271,7 @@ def test_a_fixed_start_keeps_its_angles_and_the_rest_finds_the_same_optimum(setu
 def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
     small_setup: Setup, setup, monkeypatch
 ) -> None:
-    import optlight.pipeline as pipeline
+    import optlight.planning.trajectory.windows as windows
 
     _, _, path, warm = setup
     calls = []
@@ -282,14 +282,14 @@ def test_a_window_that_fails_is_solved_with_the_one_before_then_named(
             raise SolverError("the trajectory NLP failed (Infeasible_Problem_Detected)")
         return TrajectoryNLPResult(warm_, True, "solved", 1.0, 0.0, 1, 0.0)
 
-    monkeypatch.setattr(pipeline, "optimize_knots", fails_from_a_fixed_start)
-    monkeypatch.setattr(pipeline, "NLP_WINDOW_KNOTS", 15)
+    monkeypatch.setattr(windows, "optimize_knots", fails_from_a_fixed_start)
+    monkeypatch.setattr(windows, "NLP_WINDOW_KNOTS", 15)
     assert path.windows(15) == [(0, 2), (2, 3), (3, 4)] and path.landmark_knots.tolist() == [0, 8, 20, 35, 46]
     # the second window fails from the first's end, and is solved with the first (free start); the
     # third fails from the second's end, with the second (fixed start at the first's end), and with
     # every segment a transfer (from the second's end)
     with pytest.raises(SolverError, match=r"between captures 3 and 4 \(visiting order\): the trajectory NLP"):
-        pipeline.optimize_path(
+        windows.optimize_path(
             small_setup.workcell,
             small_setup.trajectory_spec,
             small_setup.solver,

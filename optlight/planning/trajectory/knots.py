@@ -41,7 +41,7 @@ def optimize_knots(
     each joint's step between two knots at most ``max_step`` (rad; None: ``[trajectory]
     max_step_rad``) (the last two: a segment solved again between two postures the plan keeps,
     :func:`~optlight.planning.trajectory.clear_between_knots`); ``fallback``: the caller has
-    another way to go when this one fails (:func:`~optlight.pipeline.optimize_window`'s transfers,
+    another way to go when this one fails (:func:`~optlight.planning.trajectory.windows.optimize_window`'s transfers,
     for a warm start with segments the per-knot IK did not follow).
 
     Joint steps are weighed by 1/v_max,j² (the squared time at the velocity limits); with an
@@ -71,7 +71,7 @@ def optimize_knots(
     barrier has nothing to keep, and a path the arm cannot follow on the sphere took as long again
     to be found infeasible (photometric_stereo: 245 more iterations, 4 s). The retry also tells
     IPOPT to expect an infeasible problem (restoration sooner, left only on a real reduction): most
-    retries that fail are windows the fallbacks of :func:`~optlight.pipeline.optimize_window` then
+    retries that fail are windows the fallbacks of :func:`~optlight.planning.trajectory.windows.optimize_window` then
     solve, and so those retries give up in about half the iterations, while every solve that
     succeeds takes the same iterations to the same plan. Not the first try: there it sends
     face_ur5's first solve to knots that hold a capture's light at the antipode of its landmark
